@@ -1,0 +1,86 @@
+"""Rigid-transform helpers shared by the client, the service and the simulator.
+
+Conventions (DESIGN §2): quaternions are ``[x, y, z, w]`` (scalar last, as scipy and ROS),
+poses are 4×4 homogeneous matrices mapping points from a child frame into a parent frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+#: How far a quaternion's norm may stray from 1 before it is refused rather than trusted.
+UNIT_QUATERNION_TOLERANCE = 1e-3
+#: How far ``RᵀR`` may stray from the identity before a matrix counts as non-rigid.
+ORTHONORMAL_TOLERANCE = 1e-4
+
+
+def check_unit_quaternion(quaternion: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``quaternion`` is a finite unit ``[x, y, z, w]``."""
+    q = np.asarray(quaternion, dtype=np.float64)
+    if q.shape != (4,):
+        raise ValueError(f"quaternion must have 4 elements [x, y, z, w], got shape {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError("quaternion contains NaN or inf")
+    norm = float(np.linalg.norm(q))
+    if abs(norm - 1.0) > UNIT_QUATERNION_TOLERANCE:
+        raise ValueError(f"quaternion must have unit length, its norm is {norm:.6g}")
+
+
+def check_rigid_matrix(matrix: np.ndarray) -> None:
+    """Raise ``ValueError`` unless ``matrix`` is a finite 4×4 rigid transform (rotation + translation)."""
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4):
+        raise ValueError(f"pose matrix must be 4x4, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("pose matrix contains NaN or inf")
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise ValueError(f"pose matrix last row must be [0, 0, 0, 1], got {m[3].tolist()}")
+    rotation = m[:3, :3]
+    error = float(np.abs(rotation.T @ rotation - np.eye(3)).max())
+    if error > ORTHONORMAL_TOLERANCE:
+        raise ValueError(f"pose matrix is not rigid: rotation part is not orthonormal (error {error:.3g})")
+    if np.linalg.det(rotation) < 0:
+        raise ValueError("pose matrix is not rigid: rotation part is a reflection (det < 0)")
+
+
+def matrix_from_pose(position: np.ndarray, quaternion: np.ndarray) -> np.ndarray:
+    """4×4 transform from a position and an ``[x, y, z, w]`` quaternion."""
+    matrix = np.eye(4)
+    matrix[:3, :3] = Rotation.from_quat(np.asarray(quaternion, dtype=np.float64)).as_matrix()
+    matrix[:3, 3] = position
+    return matrix
+
+
+def pose_from_matrix(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(position, quaternion [x, y, z, w])`` of a 4×4 rigid transform."""
+    m = np.asarray(matrix, dtype=np.float64)
+    return m[:3, 3].copy(), Rotation.from_matrix(m[:3, :3]).as_quat()
+
+
+def invert(matrix: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid transform, without a general matrix inversion."""
+    inverse = np.eye(4)
+    rotation_t = matrix[:3, :3].T
+    inverse[:3, :3] = rotation_t
+    inverse[:3, 3] = -rotation_t @ matrix[:3, 3]
+    return inverse
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0)) -> np.ndarray:
+    """Camera→world pose of an OpenCV camera at ``eye`` looking at ``target``.
+
+    The optical frame has x right, y down and z forward (DESIGN §2). ``up`` is a world
+    direction that should appear upwards in the image; it must not be parallel to the view.
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    if np.linalg.norm(right) < 1e-9:
+        raise ValueError("look_at: the up vector is parallel to the viewing direction")
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, down, forward, eye
+    return pose

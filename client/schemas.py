@@ -1,0 +1,263 @@
+"""The wire schemas of the grasp-planning API, defined once for the service and the client.
+
+The service validates requests with these models and builds its responses from them; the
+client builds requests and parses responses with the same models, so the two cannot drift.
+Frames and units follow DESIGN §2: metres, radians (degrees only where a field says so),
+quaternions ``[x, y, z, w]``, camera poses camera→world in the OpenCV optical frame.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
+
+from client.geometry import check_rigid_matrix, check_unit_quaternion, pose_from_matrix
+
+Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+Quaternion = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
+SESSION_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+MAX_IMAGE_SIDE = 8192
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Pose(_Model):
+    """A rigid transform child→parent: ``position`` in metres and a unit ``orientation``.
+
+    Also accepts ``{"matrix": [[...4x4...]]}``, which is checked for rigidity and stored as
+    position + quaternion.
+    """
+
+    position: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    orientation: Quaternion = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0, 1.0], description="unit quaternion [x, y, z, w]"
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _from_matrix(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "matrix" in data:
+            if set(data) != {"matrix"}:
+                raise ValueError("give either 'matrix' or 'position'/'orientation', not both")
+            try:
+                matrix = np.asarray(data["matrix"], dtype=np.float64)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"pose matrix must be a 4x4 array of numbers: {error}") from None
+            check_rigid_matrix(matrix)
+            position, quaternion = pose_from_matrix(matrix)
+            return {"position": position.tolist(), "orientation": quaternion.tolist()}
+        return data
+
+    @field_validator("orientation")
+    @classmethod
+    def _unit_quaternion(cls, value: list[float]) -> list[float]:
+        check_unit_quaternion(np.asarray(value))
+        return value
+
+    @classmethod
+    def from_matrix(cls, matrix: np.ndarray) -> Pose:
+        """Pose of a 4×4 rigid transform (checked)."""
+        return cls.model_validate({"matrix": np.asarray(matrix).tolist()})
+
+    def as_matrix(self) -> np.ndarray:
+        from client.geometry import matrix_from_pose
+
+        return matrix_from_pose(np.asarray(self.position), np.asarray(self.orientation))
+
+
+class Intrinsics(_Model):
+    """Pinhole intrinsics of a depth camera, in pixels."""
+
+    width: int = Field(gt=0, le=MAX_IMAGE_SIDE)
+    height: int = Field(gt=0, le=MAX_IMAGE_SIDE)
+    fx: FiniteFloat = Field(gt=0)
+    fy: FiniteFloat = Field(gt=0)
+    cx: FiniteFloat
+    cy: FiniteFloat
+
+    @model_validator(mode="after")
+    def _principal_point_inside(self) -> Intrinsics:
+        if not (0 < self.cx < self.width and 0 < self.cy < self.height):
+            raise ValueError(
+                f"principal point ({self.cx}, {self.cy}) must lie inside the "
+                f"{self.width}x{self.height} image"
+            )
+        return self
+
+
+class Workspace(_Model):
+    """The cube that is fused and searched for grasps: side ``size`` metres, ``resolution``
+    voxels a side, its corner at ``pose`` in the world (DESIGN §2)."""
+
+    size: FiniteFloat = Field(default=0.30, gt=0.01, le=5.0, description="side length in metres")
+    resolution: int = Field(
+        default=40, ge=16, le=160, description="voxels per side; a multiple of 8 (network strides)"
+    )
+    pose: Pose = Field(default_factory=Pose, description="workspace corner → world")
+
+    @field_validator("resolution")
+    @classmethod
+    def _multiple_of_eight(cls, value: int) -> int:
+        if value % 8:
+            raise ValueError(f"resolution must be a multiple of 8 (the network downsamples 8x), got {value}")
+        return value
+
+    @property
+    def voxel_size(self) -> float:
+        return self.size / self.resolution
+
+
+class SessionCreate(_Model):
+    session_id: str | None = Field(
+        default=None, pattern=SESSION_ID_PATTERN, description="chosen id; generated when absent"
+    )
+    workspace: Workspace = Field(default_factory=Workspace)
+    intrinsics: Intrinsics | None = Field(
+        default=None, description="default intrinsics for this session's frames"
+    )
+
+
+class SessionInfo(_Model):
+    session_id: str
+    workspace: Workspace
+    intrinsics: Intrinsics | None
+    frame_count: int
+    integration_ms: float = Field(description="total integration time of this session's frames")
+    created_at: float = Field(description="unix time")
+    last_used_at: float = Field(description="unix time")
+    expires_at: float = Field(description="unix time at which an idle session is dropped")
+
+
+class SessionList(_Model):
+    sessions: list[SessionInfo]
+    max_sessions: int
+
+
+class FrameMeta(_Model):
+    """The ``meta`` part of a frame upload."""
+
+    camera_pose: Pose = Field(description="camera → world, OpenCV optical frame")
+    intrinsics: Intrinsics | None = Field(default=None, description="required unless the session has them")
+    depth_scale: FiniteFloat = Field(default=1000.0, gt=0, description="PNG units per metre")
+    max_depth: FiniteFloat = Field(default=2.0, gt=0, description="readings beyond this (m) are ignored")
+
+
+class FrameResult(_Model):
+    session_id: str
+    frame_count: int
+    integration_ms: float = Field(description="time to integrate this frame")
+
+
+def _parse_vector3(name: str, text: str | None) -> tuple[float, float, float] | None:
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        values = tuple(float(part) for part in parts)
+    except ValueError:
+        raise ValueError(f"{name} must be three comma-separated numbers, got {text!r}") from None
+    if len(values) != 3 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{name} must be three finite comma-separated numbers, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+class GraspQuery(_Model):
+    """Options of one grasp request (query parameters of ``GET /sessions/{id}/grasps``)."""
+
+    threshold: float = Field(default=0.9, ge=0.0, le=1.0, description="minimum grasp quality")
+    max_grasps: int | None = Field(default=None, ge=1, le=10000, description="return at most this many")
+    nms_size: int = Field(default=4, ge=1, le=15, description="non-maximum suppression window (voxels)")
+    crop_min: str | None = Field(
+        default=None, description="'x,y,z': lower corner of a crop box, workspace frame, metres"
+    )
+    crop_max: str | None = Field(
+        default=None, description="'x,y,z': upper corner of a crop box, workspace frame, metres"
+    )
+    approach: str | None = Field(
+        default=None, description="'x,y,z': preferred approach direction, world frame"
+    )
+    max_approach_angle: float | None = Field(
+        default=None, gt=0.0, le=180.0, description="degrees between a grasp's approach and `approach`"
+    )
+
+    @model_validator(mode="after")
+    def _consistent(self) -> GraspQuery:
+        crop_min, crop_max = self.crop_box or (None, None)
+        if crop_min is not None and crop_max is not None and any(
+            lo >= hi for lo, hi in zip(crop_min, crop_max, strict=True)
+        ):
+            raise ValueError(f"crop_min {crop_min} must be below crop_max {crop_max} on every axis")
+        direction = self.approach_direction
+        if (direction is None) != (self.max_approach_angle is None):
+            raise ValueError("approach and max_approach_angle must be given together")
+        if direction is not None and np.linalg.norm(direction) < 1e-9:
+            raise ValueError("approach must be a non-zero direction")
+        return self
+
+    @property
+    def crop_box(self) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None] | None:
+        if self.crop_min is None and self.crop_max is None:
+            return None
+        return _parse_vector3("crop_min", self.crop_min), _parse_vector3("crop_max", self.crop_max)
+
+    @property
+    def approach_direction(self) -> tuple[float, float, float] | None:
+        return _parse_vector3("approach", self.approach)
+
+    def to_params(self) -> dict[str, Any]:
+        return self.model_dump(exclude_none=True)
+
+
+class Grasp(_Model):
+    """A parallel-jaw grasp in the world frame (grasp frame: DESIGN §2)."""
+
+    position: Vector3 = Field(description="centre between the finger bases, metres")
+    orientation: Quaternion = Field(description="grasp frame → world, [x, y, z, w]")
+    approach: Vector3 = Field(description="unit approach direction (grasp z axis)")
+    width: float = Field(description="opening width, metres")
+    quality: float = Field(ge=0.0, le=1.0)
+
+    def as_matrix(self) -> np.ndarray:
+        from client.geometry import matrix_from_pose
+
+        return matrix_from_pose(np.asarray(self.position), np.asarray(self.orientation))
+
+
+class GraspResult(_Model):
+    grasps: list[Grasp] = Field(description="best first")
+    planning_ms: float = Field(description="grid read-out + network + detection on the service")
+    integration_ms: float = Field(description="total integration time of the fused frames")
+    frame_count: int
+    model: str = Field(description="id of the weights that planned these grasps")
+
+
+class ModelInfo(_Model):
+    loaded: bool
+    model_id: str | None = Field(description="sha256 prefix of the weights file")
+    source: str | None = Field(description="where the weights were loaded from")
+    architecture: str
+    parameters: int
+    device: str
+    detail: str | None = Field(default=None, description="why no model is loaded, if none is")
+    conventions: dict[str, str]
+
+
+class Health(_Model):
+    status: str
+
+
+class Readiness(_Model):
+    ready: bool
+    detail: str
+
+
+class ErrorResponse(BaseModel):
+    """Every 4xx/5xx answer: ``detail`` says what is wrong (a list of field errors for 422)."""
+
+    detail: str | list[dict[str, Any]]
+    message: str | None = Field(default=None, description="one-line summary of a 422's field errors")

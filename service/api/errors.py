@@ -1,0 +1,83 @@
+"""Every error leaves as JSON ``{detail, ...}`` with the right status; bad input never gives a 500."""
+
+from __future__ import annotations
+
+import logging
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import ValidationError
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from service.api.limits import BodyTooLarge
+from service.errors import (
+    CapacityExceeded,
+    InvalidInput,
+    ModelNotReady,
+    ServiceError,
+    SessionExists,
+    SessionNotFound,
+    UnsupportedMediaType,
+)
+from service.vgn.checkpoint import CheckpointError
+
+log = logging.getLogger("vgn.service")
+
+STATUS_OF: dict[type[ServiceError], int] = {
+    InvalidInput: 400,
+    SessionNotFound: 404,
+    SessionExists: 409,
+    UnsupportedMediaType: 415,
+    CapacityExceeded: 503,
+    ModelNotReady: 503,
+}
+
+
+def field_errors(errors: list) -> tuple[list[dict], str]:
+    """JSON-safe field errors and a one-line summary naming each bad field."""
+    cleaned = [
+        {"loc": list(e.get("loc", ())), "msg": str(e.get("msg", "")), "type": str(e.get("type", ""))}
+        for e in errors
+    ]
+    summary = "; ".join(".".join(str(p) for p in e["loc"]) + ": " + e["msg"] for e in cleaned)
+    return cleaned, summary
+
+
+def validation_response(errors: list, prefix: tuple[str, ...] = ()) -> JSONResponse:
+    cleaned, summary = field_errors([{**e, "loc": (*prefix, *e.get("loc", ()))} for e in errors])
+    return JSONResponse(status_code=422, content={"detail": cleaned, "message": summary})
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(ServiceError)
+    async def _service_error(_: Request, error: ServiceError) -> JSONResponse:
+        status = next((code for kind, code in STATUS_OF.items() if isinstance(error, kind)), 400)
+        headers = {"Retry-After": "5"} if isinstance(error, CapacityExceeded) else None
+        return JSONResponse(status_code=status, content={"detail": str(error)}, headers=headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _request_validation(_: Request, error: RequestValidationError) -> JSONResponse:
+        return validation_response(list(error.errors()))
+
+    @app.exception_handler(ValidationError)
+    async def _model_validation(_: Request, error: ValidationError) -> JSONResponse:
+        return validation_response(list(error.errors()))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(_: Request, error: StarletteHTTPException) -> JSONResponse:
+        return JSONResponse(status_code=error.status_code, content={"detail": error.detail},
+                            headers=getattr(error, "headers", None))
+
+    @app.exception_handler(BodyTooLarge)
+    async def _too_large(_: Request, error: BodyTooLarge) -> JSONResponse:
+        return JSONResponse(status_code=413, content={"detail": str(error)})
+
+    @app.exception_handler(CheckpointError)
+    async def _checkpoint(_: Request, error: CheckpointError) -> JSONResponse:
+        return JSONResponse(status_code=503, content={"detail": str(error)})
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, error: Exception) -> JSONResponse:
+        log.exception("unhandled error on %s %s", request.method, request.url.path)
+        return JSONResponse(status_code=500, content={"detail": f"internal error: {type(error).__name__}"})

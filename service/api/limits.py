@@ -1,0 +1,65 @@
+"""Refuse oversize request bodies with 413 before they are buffered."""
+
+from __future__ import annotations
+
+import json
+
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+
+class BodyTooLarge(Exception):
+    """Raised from ``receive`` when a streamed body passes the limit."""
+
+    def __init__(self, size: int, limit: int) -> None:
+        super().__init__(too_large_message(size, limit))
+
+
+def too_large_message(size: int, limit: int) -> str:
+    return f"request body of {size}+ bytes exceeds the limit of {limit} bytes (VGN_MAX_FRAME_BYTES)"
+
+
+class BodySizeLimit:
+    """ASGI middleware: 413 when ``Content-Length`` exceeds ``max_bytes``, or when a body
+    without one (chunked) grows past it while it is read."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope["headers"]).get(b"content-length")
+        if declared is not None and declared.isdigit() and int(declared) > self.max_bytes:
+            await self._reject(send, int(declared))
+            return
+        received = 0
+        response_started = False
+
+        async def counting_receive() -> Message:
+            nonlocal received
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.max_bytes:
+                    raise BodyTooLarge(received, self.max_bytes)
+            return message
+
+        async def tracking_send(message: Message) -> None:
+            nonlocal response_started
+            response_started = response_started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, counting_receive, tracking_send)
+        except BodyTooLarge:
+            if not response_started:
+                await self._reject(send, received)
+
+    async def _reject(self, send: Send, size: int) -> None:
+        body = json.dumps({"detail": too_large_message(size, self.max_bytes)}).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"),
+                                (b"content-length", str(len(body)).encode())]})
+        await send({"type": "http.response.body", "body": body})

@@ -1,0 +1,232 @@
+"""HTTP routes over the planning core. Handlers stay thin: parse, call the core, encode."""
+
+from __future__ import annotations
+
+import io
+import secrets
+from typing import Annotated
+
+import numpy as np
+from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+from pydantic import ValidationError
+from starlette.datastructures import UploadFile
+from starlette.formparsers import MultiPartException
+
+from client.schemas import (
+    ErrorResponse,
+    FrameMeta,
+    FrameResult,
+    GraspQuery,
+    GraspResult,
+    Health,
+    ModelInfo,
+    Readiness,
+    SessionCreate,
+    SessionInfo,
+    SessionList,
+)
+from service.api.errors import validation_response
+from service.api.metrics import ServiceMetrics
+from service.core import PlanningService
+from service.errors import InvalidInput, UnsupportedMediaType
+
+NPY_MEDIA_TYPE = "application/x-npy"
+PLY_MEDIA_TYPE = "application/x-ply"
+
+
+def core(request: Request) -> PlanningService:
+    return request.app.state.core
+
+
+def metrics(request: Request) -> ServiceMetrics:
+    return request.app.state.metrics
+
+
+def require_api_key(
+    request: Request,
+    x_api_key: Annotated[str | None, Header()] = None,
+    authorization: Annotated[str | None, Header()] = None,
+) -> None:
+    """When ``VGN_API_KEY`` is set, every route but health checks needs it."""
+    expected = request.app.state.settings.api_key
+    if expected is None:
+        return
+    given = x_api_key
+    if given is None and authorization and authorization.lower().startswith("bearer "):
+        given = authorization[7:].strip()
+    if given is None or not secrets.compare_digest(given.encode(), expected.encode()):
+        from fastapi import HTTPException
+
+        raise HTTPException(401, "missing or wrong API key (X-API-Key or Authorization: Bearer)",
+                            headers={"WWW-Authenticate": "Bearer"})
+
+
+Core = Annotated[PlanningService, Depends(core)]
+ERRORS = {code: {"model": ErrorResponse} for code in (400, 401, 404, 413, 415, 422, 503)}
+
+health = APIRouter(tags=["health"])
+api = APIRouter(dependencies=[Depends(require_api_key)], responses=ERRORS)
+
+
+@health.get("/healthz", response_model=Health)
+def healthz() -> Health:
+    """The process is up (no model needed)."""
+    return Health(status="ok")
+
+
+@health.get("/readyz", response_model=Readiness, responses={503: {"model": Readiness}})
+def readyz(service: Core, response: Response) -> Readiness:
+    """Ready to plan: a model is loaded and warmed up."""
+    info = service.model_info()
+    if not info.loaded:
+        response.status_code = 503
+        return Readiness(ready=False, detail=info.detail or "no model")
+    return Readiness(ready=True, detail=f"model {info.model_id} loaded on {info.device}")
+
+
+@api.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
+def prometheus_metrics(service: Core, request: Request) -> Response:
+    """Prometheus text exposition."""
+    registry = metrics(request)
+    registry.sessions.set(len(service.sessions))
+    registry.model_loaded.set(1 if service.planner.ready else 0)
+    return Response(registry.render(), media_type="text/plain; version=0.0.4")
+
+
+@api.get("/model", response_model=ModelInfo)
+def model(service: Core) -> ModelInfo:
+    """The loaded model: weights id, source, architecture, device and conventions."""
+    return service.model_info()
+
+
+@api.post("/sessions", status_code=201, response_model=SessionInfo)
+def create_session(service: Core, spec: SessionCreate | None = None) -> SessionInfo:
+    """Open a session: an empty TSDF volume over the workspace (defaults: 0.30 m, 40³, at the world origin)."""
+    return service.create_session(spec or SessionCreate())
+
+
+@api.get("/sessions", response_model=SessionList)
+def list_sessions(service: Core) -> SessionList:
+    return SessionList(sessions=service.list_sessions(), max_sessions=service.sessions.max_sessions)
+
+
+@api.get("/sessions/{session_id}", response_model=SessionInfo)
+def get_session(service: Core, session_id: str) -> SessionInfo:
+    return service.session_info(session_id)
+
+
+@api.delete("/sessions/{session_id}", status_code=204, response_class=Response)
+def delete_session(service: Core, session_id: str) -> Response:
+    service.delete_session(session_id)
+    return Response(status_code=204)
+
+
+@api.post("/sessions/{session_id}/reset", response_model=SessionInfo)
+def reset_session(service: Core, session_id: str) -> SessionInfo:
+    """Empty the session's volume, keeping its workspace and intrinsics."""
+    return service.reset_session(session_id)
+
+
+FRAME_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["meta", "depth"],
+                    "properties": {
+                        "meta": {"type": "string", "description": "JSON FrameMeta (camera_pose, intrinsics, depth_scale, max_depth)"},
+                        "depth": {"type": "string", "format": "binary",
+                                  "description": "16-bit PNG (image/png) or float32 metres (application/octet-stream)"},
+                    },
+                }
+            }
+        },
+    }
+}
+
+
+@api.post("/sessions/{session_id}/frames", response_model=FrameResult, openapi_extra=FRAME_BODY)
+async def add_frame(service: Core, session_id: str, request: Request):
+    """Fuse one depth frame. Multipart parts: ``meta`` (JSON) and ``depth`` (a file part)."""
+    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if media_type != "multipart/form-data":
+        raise UnsupportedMediaType(f"frames must be multipart/form-data, got {media_type or 'no content type'!r}")
+    try:
+        form = await request.form(max_files=4, max_fields=8,
+                                  max_part_size=request.app.state.settings.max_frame_bytes)
+    except MultiPartException as error:
+        raise InvalidInput(f"malformed multipart body: {error.message}") from None
+    try:
+        meta_text, data, content_type = await _frame_parts(form)
+    finally:
+        await form.close()
+    try:
+        meta = FrameMeta.model_validate_json(meta_text)
+    except ValidationError as error:
+        return validation_response(list(error.errors()), prefix=("meta",))
+    result = await run_in_threadpool(service.add_encoded_frame, session_id, data, content_type, meta)
+    metrics(request).integration.observe(result.integration_ms / 1e3)
+    return result
+
+
+@api.get("/sessions/{session_id}/grasps", response_model=GraspResult)
+def grasps(service: Core, session_id: str, request: Request,
+           query: Annotated[GraspQuery, Query()]) -> GraspResult:
+    """Ranked grasps, best first, in the world frame, planned by VGN on the fused volume."""
+    result = service.plan(session_id, query)
+    metrics(request).planning.observe(result.planning_ms / 1e3)
+    metrics(request).grasps.inc(len(result.grasps))
+    return result
+
+
+async def _frame_parts(form) -> tuple[str | bytes, bytes, str]:
+    """The meta JSON, the depth bytes and the depth media type of a frame upload."""
+    meta_part, depth_part = form.get("meta"), form.get("depth")
+    missing = [name for name, part in (("meta", meta_part), ("depth", depth_part)) if part is None]
+    if missing:
+        raise InvalidInput(f"multipart body lacks the part(s) {missing}")
+    if not isinstance(depth_part, UploadFile):
+        raise InvalidInput("the depth part must be a file part (with a filename and a content type)")
+    meta_text = await meta_part.read() if isinstance(meta_part, UploadFile) else meta_part
+    return meta_text, await depth_part.read(), depth_part.content_type or ""
+
+
+def _npy(array: np.ndarray) -> bytes:
+    buffer = io.BytesIO()
+    np.save(buffer, array, allow_pickle=False)
+    return buffer.getvalue()
+
+
+@api.get("/sessions/{session_id}/tsdf", response_class=Response,
+         responses={200: {"content": {NPY_MEDIA_TYPE: {}}}})
+def tsdf(service: Core, session_id: str) -> Response:
+    """The (N, N, N) float32 network input as ``.npy``, indexed [x, y, z] in the workspace frame."""
+    return Response(_npy(service.grid(session_id)), media_type=NPY_MEDIA_TYPE)
+
+
+@api.get("/sessions/{session_id}/cloud", response_class=Response,
+         responses={200: {"content": {NPY_MEDIA_TYPE: {}, PLY_MEDIA_TYPE: {}}}, 406: {"model": ErrorResponse}})
+def cloud(service: Core, session_id: str, accept: Annotated[str | None, Header()] = None) -> Response:
+    """Surface points and outward normals in the world frame: ``.npy`` (M, 6) float32 by
+    default, binary PLY with ``Accept: application/x-ply``."""
+    wanted = (accept or "*/*").lower()
+    if PLY_MEDIA_TYPE in wanted:
+        return Response(_ply(service.cloud(session_id)), media_type=PLY_MEDIA_TYPE)
+    if NPY_MEDIA_TYPE in wanted or "*/*" in wanted or "application/*" in wanted:
+        return Response(_npy(service.cloud(session_id)), media_type=NPY_MEDIA_TYPE)
+    from fastapi import HTTPException
+
+    raise HTTPException(406, f"cloud is served as {NPY_MEDIA_TYPE} or {PLY_MEDIA_TYPE}, not {accept!r}")
+
+
+def _ply(cloud: np.ndarray) -> bytes:
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {len(cloud)}\n"
+        "property float x\nproperty float y\nproperty float z\n"
+        "property float nx\nproperty float ny\nproperty float nz\nend_header\n"
+    )
+    return header.encode("ascii") + np.ascontiguousarray(cloud, dtype="<f4").tobytes()

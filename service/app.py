@@ -1,0 +1,72 @@
+"""The FastAPI application: ``uvicorn service.app:app``.
+
+The model is loaded at start-up (lifespan), so importing this module is cheap and a
+misconfigured ``VGN_MODEL`` stops the server with a clear message instead of serving 500s.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import AsyncIterator
+
+from fastapi import FastAPI
+
+from service.api.errors import install_error_handlers
+from service.api.limits import BodySizeLimit
+from service.api.metrics import RequestMetrics, ServiceMetrics
+from service.api.routes import api, health
+from service.core import PlanningService
+from service.settings import Settings
+
+log = logging.getLogger("vgn.service")
+#: Bytes allowed beside the depth image in a frame upload (meta JSON, multipart headers).
+MULTIPART_OVERHEAD = 64 * 1024
+SWEEP_INTERVAL_S = 30.0
+
+
+def create_app(settings: Settings | None = None, core: PlanningService | None = None) -> FastAPI:
+    """An app over ``core`` (built from ``settings`` at start-up when not given)."""
+    settings = settings or (core.settings if core else Settings())
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        if app.state.core is None:
+            app.state.core = await asyncio.to_thread(PlanningService.from_settings, settings)
+        service: PlanningService = app.state.core
+        info = service.model_info()
+        log.info("model: %s", f"{info.model_id} from {info.source}" if info.loaded else info.detail)
+        sweeper = asyncio.create_task(_sweep_forever(service))
+        try:
+            yield
+        finally:
+            sweeper.cancel()
+
+    app = FastAPI(
+        title="vgn-service",
+        version="0.1.0",
+        summary="Real-time 6-DOF grasp planning with the Volumetric Grasping Network",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.core = core
+    app.state.metrics = ServiceMetrics()
+    install_error_handlers(app)
+    app.include_router(health)
+    app.include_router(api)
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_frame_bytes + MULTIPART_OVERHEAD)
+    app.add_middleware(RequestMetrics, metrics=app.state.metrics)
+    return app
+
+
+async def _sweep_forever(service: PlanningService) -> None:
+    """Drop expired sessions even when nobody calls, so their memory is returned."""
+    while True:
+        await asyncio.sleep(SWEEP_INTERVAL_S)
+        dropped = service.sessions.sweep()
+        if dropped:
+            log.info("expired %d idle session(s)", dropped)
+
+
+app = create_app()

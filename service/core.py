@@ -1,0 +1,160 @@
+"""The planning core: sessions, fusion and grasp planning behind one object.
+
+Front ends (the FastAPI app, a future gRPC server, in-process benchmarks) call this and map
+its ``ServiceError``s to their own codes; nothing here knows about HTTP.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from client.schemas import (
+    FrameMeta,
+    FrameResult,
+    GraspQuery,
+    GraspResult,
+    Intrinsics,
+    ModelInfo,
+    SessionCreate,
+    SessionInfo,
+)
+from service.depth import decode_depth
+from service.errors import InvalidInput, ModelNotReady
+from service.planner import NO_MODEL_MESSAGE, GraspPlanner
+from service.settings import Settings
+from service.sessions import SessionStore
+
+CONVENTIONS = {
+    "units": "metres, seconds; angles in query parameters in degrees",
+    "quaternion": "[x, y, z, w], unit length",
+    "camera": "pinhole, OpenCV optical frame (x right, y down, z forward); camera_pose is camera->world",
+    "workspace": "cube of side `size` whose corner is at the workspace pose; voxel (i,j,k) at (i,j,k)*voxel_size",
+    "grasp_frame": "+z approach, y finger closing axis, origin between the finger bases",
+    "grid": "observed |tsdf|<0.98 voxels hold (tsdf+1)/2, others 0; indexed [x, y, z]",
+}
+
+
+class PlanningService:
+    """Sessions of fused depth frames and VGN grasp planning on them (thread-safe)."""
+
+    def __init__(self, settings: Settings, planner: GraspPlanner) -> None:
+        self.settings = settings
+        self.planner = planner
+        self.sessions = SessionStore(settings.max_sessions, settings.session_ttl_s, settings.cloud_resolution)
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> PlanningService:
+        """Load the configured model (raises ``CheckpointError`` if it cannot be loaded)."""
+        if settings.torch_threads:
+            import torch
+
+            torch.set_num_threads(settings.torch_threads)
+        return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device))
+
+    # Sessions -----------------------------------------------------------------------------
+    def create_session(self, spec: SessionCreate) -> SessionInfo:
+        return self.sessions.create(spec).info(self.sessions.ttl_s)
+
+    def session_info(self, session_id: str) -> SessionInfo:
+        return self.sessions.info(session_id)
+
+    def list_sessions(self) -> list[SessionInfo]:
+        return self.sessions.list()
+
+    def delete_session(self, session_id: str) -> None:
+        self.sessions.delete(session_id)
+
+    def reset_session(self, session_id: str) -> SessionInfo:
+        with self.sessions.use(session_id) as session:
+            session.reset()
+            return session.info(self.sessions.ttl_s)
+
+    # Frames -------------------------------------------------------------------------------
+    def add_encoded_frame(self, session_id: str, data: bytes, media_type: str, meta: FrameMeta) -> FrameResult:
+        """Decode an uploaded depth image (PNG or raw float32) and fuse it.
+
+        The image is decoded and checked before the session is touched, so a rejected frame
+        leaves the volume as it was.
+        """
+        intrinsics = self._frame_intrinsics(session_id, meta.intrinsics)
+        depth = decode_depth(data, media_type, intrinsics, meta.depth_scale)
+        return self.add_frame(session_id, depth, meta.camera_pose.as_matrix(), intrinsics, meta.max_depth)
+
+    def add_frame(
+        self,
+        session_id: str,
+        depth: np.ndarray,
+        camera_pose: np.ndarray,
+        intrinsics: Intrinsics | None = None,
+        max_depth: float = 2.0,
+    ) -> FrameResult:
+        """Fuse a depth image (H, W) in metres taken from ``camera_pose`` (4×4 camera → world).
+
+        Invalid readings (0, NaN, inf) are ignored; ``intrinsics`` default to the session's.
+        """
+        intrinsics = self._frame_intrinsics(session_id, intrinsics)
+        depth = np.asarray(depth)
+        if depth.shape != (intrinsics.height, intrinsics.width):
+            raise InvalidInput(f"depth has shape {depth.shape}, intrinsics say {(intrinsics.height, intrinsics.width)}")
+        depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+        with self.sessions.use(session_id) as session:
+            started = time.perf_counter()
+            session.volume.integrate(depth, intrinsics, camera_pose, max_depth)
+            elapsed_ms = (time.perf_counter() - started) * 1e3
+            session.frame_count += 1
+            session.integration_ms += elapsed_ms
+            return FrameResult(session_id=session_id, frame_count=session.frame_count,
+                               integration_ms=round(elapsed_ms, 3))
+
+    def _frame_intrinsics(self, session_id: str, intrinsics: Intrinsics | None) -> Intrinsics:
+        if intrinsics is not None:
+            return intrinsics
+        session_intrinsics = self.sessions.info(session_id).intrinsics
+        if session_intrinsics is None:
+            raise InvalidInput("frame has no intrinsics and the session has no default intrinsics")
+        return session_intrinsics
+
+    # Read-outs ----------------------------------------------------------------------------
+    def grid(self, session_id: str) -> np.ndarray:
+        """The session's (N, N, N) float32 network input, workspace frame."""
+        with self.sessions.use(session_id) as session:
+            return session.volume.grid()
+
+    def cloud(self, session_id: str) -> np.ndarray:
+        """(M, 6) float32 surface points and normals, world frame."""
+        with self.sessions.use(session_id) as session:
+            return session.volume.cloud()
+
+    def plan(self, session_id: str, query: GraspQuery) -> GraspResult:
+        """Ranked grasps (world frame, best first) on the session's fused volume."""
+        if not self.planner.ready:
+            raise ModelNotReady(NO_MODEL_MESSAGE)
+        with self.sessions.use(session_id) as session:
+            started = time.perf_counter()
+            grid = session.volume.grid()
+            voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
+            frame_count, integration_ms = session.frame_count, session.integration_ms
+        # The forward pass runs outside the session lock so frames can keep arriving.
+        grasps, _ = self.planner.plan(grid, voxel_size, workspace_pose, query)
+        planning_ms = (time.perf_counter() - started) * 1e3
+        return GraspResult(
+            grasps=grasps,
+            planning_ms=round(planning_ms, 3),
+            integration_ms=round(integration_ms, 3),
+            frame_count=frame_count,
+            model=self.planner.model_id or "",
+        )
+
+    def model_info(self) -> ModelInfo:
+        return ModelInfo(
+            loaded=self.planner.ready,
+            model_id=self.planner.model_id,
+            source=self.planner.source,
+            architecture="VGN (Breyer et al., CoRL 2020)",
+            parameters=self.planner.parameters,
+            device=str(self.planner.device),
+            detail=None if self.planner.ready else NO_MODEL_MESSAGE,
+            conventions=CONVENTIONS,
+        )

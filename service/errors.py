@@ -1,0 +1,31 @@
+"""Domain errors of the planning core; front ends (HTTP now, gRPC later) map them to codes."""
+
+from __future__ import annotations
+
+
+class ServiceError(Exception):
+    """Base class: ``str(error)`` is a message fit to show the caller."""
+
+
+class InvalidInput(ServiceError):
+    """The caller sent something malformed (HTTP 400)."""
+
+
+class UnsupportedMediaType(ServiceError):
+    """A depth encoding we do not read (HTTP 415)."""
+
+
+class SessionNotFound(ServiceError):
+    """No session with that id, or it expired (HTTP 404)."""
+
+
+class SessionExists(ServiceError):
+    """A session with the requested id already exists (HTTP 409)."""
+
+
+class CapacityExceeded(ServiceError):
+    """The session limit is reached and no session is idle to evict (HTTP 503)."""
+
+
+class ModelNotReady(ServiceError):
+    """No model is loaded, so grasps cannot be planned (HTTP 503)."""

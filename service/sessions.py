@@ -1,0 +1,148 @@
+"""Sessions: one fused scene each, guarded by a lock, expiring after a TTL."""
+
+from __future__ import annotations
+
+import threading
+import time
+import uuid
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
+from service.errors import CapacityExceeded, SessionExists, SessionNotFound
+from service.tsdf import SceneVolume
+
+
+@dataclass
+class Session:
+    """A workspace being fused. Mutate it only while holding ``lock`` (see ``SessionStore.use``)."""
+
+    session_id: str
+    workspace: Workspace
+    intrinsics: Intrinsics | None
+    volume: SceneVolume
+    created_at: float
+    last_used_at: float
+    frame_count: int = 0
+    integration_ms: float = 0.0
+    users: int = 0  # requests holding or waiting for the session; only idle ones are evicted
+    lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def reset(self) -> None:
+        self.volume.reset()
+        self.frame_count = 0
+        self.integration_ms = 0.0
+
+    def info(self, ttl_s: float) -> SessionInfo:
+        return SessionInfo(
+            session_id=self.session_id,
+            workspace=self.workspace,
+            intrinsics=self.intrinsics,
+            frame_count=self.frame_count,
+            integration_ms=round(self.integration_ms, 3),
+            created_at=self.created_at,
+            last_used_at=self.last_used_at,
+            expires_at=self.last_used_at + ttl_s,
+        )
+
+
+class SessionStore:
+    """Thread-safe registry of sessions with a TTL and a size limit.
+
+    At the limit, creating a session evicts the least recently used *idle* one; when every
+    session is in use the creation fails with ``CapacityExceeded``.
+    """
+
+    def __init__(self, max_sessions: int, ttl_s: float, cloud_resolution: int,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.max_sessions = max_sessions
+        self.ttl_s = ttl_s
+        self._cloud_resolution = cloud_resolution
+        self._clock = clock
+        self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
+        self._lock = threading.Lock()
+
+    def create(self, spec: SessionCreate) -> Session:
+        now = self._clock()
+        workspace = spec.workspace
+        volume = SceneVolume(workspace.size, workspace.resolution, workspace.pose.as_matrix(),
+                             self._cloud_resolution)
+        with self._lock:
+            self._drop_expired(now)
+            session_id = spec.session_id or uuid.uuid4().hex
+            if session_id in self._sessions:
+                raise SessionExists(f"session {session_id!r} already exists")
+            if len(self._sessions) >= self.max_sessions:
+                self._evict_one()
+            session = Session(session_id, workspace, spec.intrinsics, volume, now, now)
+            self._sessions[session_id] = session
+            return session
+
+    @contextmanager
+    def use(self, session_id: str) -> Iterator[Session]:
+        """Hold a session exclusively: it is neither evicted nor touched by others meanwhile."""
+        with self._lock:
+            session = self._live(session_id, self._clock())
+            session.users += 1
+        try:
+            with session.lock:
+                yield session
+        finally:
+            with self._lock:
+                session.users -= 1
+                session.last_used_at = self._clock()
+                if session_id in self._sessions:
+                    self._sessions.move_to_end(session_id)
+
+    def info(self, session_id: str) -> SessionInfo:
+        with self._lock:
+            return self._live(session_id, self._clock()).info(self.ttl_s)
+
+    def list(self) -> list[SessionInfo]:
+        with self._lock:
+            self._drop_expired(self._clock())
+            return [s.info(self.ttl_s) for s in self._sessions.values()]
+
+    def delete(self, session_id: str) -> None:
+        with self._lock:
+            self._live(session_id, self._clock())
+            del self._sessions[session_id]
+
+    def sweep(self) -> int:
+        """Drop expired sessions; returns how many went."""
+        with self._lock:
+            return self._drop_expired(self._clock())
+
+    def __len__(self) -> int:
+        return len(self._sessions)
+
+    # Helpers below expect self._lock to be held.
+    def _live(self, session_id: str, now: float) -> Session:
+        session = self._sessions.get(session_id)
+        if session is None:
+            raise SessionNotFound(f"session {session_id!r} does not exist (or it expired)")
+        if self._expired(session, now):
+            del self._sessions[session_id]
+            raise SessionNotFound(f"session {session_id!r} expired after {self.ttl_s:g} s idle")
+        return session
+
+    def _expired(self, session: Session, now: float) -> bool:
+        return session.users == 0 and now - session.last_used_at > self.ttl_s
+
+    def _drop_expired(self, now: float) -> int:
+        expired = [sid for sid, s in self._sessions.items() if self._expired(s, now)]
+        for session_id in expired:
+            del self._sessions[session_id]
+        return len(expired)
+
+    def _evict_one(self) -> None:
+        for session_id, session in self._sessions.items():  # least recently used first
+            if session.users == 0:
+                del self._sessions[session_id]
+                return
+        raise CapacityExceeded(
+            f"the session limit ({self.max_sessions}) is reached and every session is in use; "
+            "delete a session or retry later"
+        )

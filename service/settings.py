@@ -1,0 +1,39 @@
+"""All service configuration in one place, read from ``VGN_*`` environment variables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+#: Where a packaged default model would live; the service uses it when ``VGN_MODEL`` is unset.
+PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
+
+
+class Settings(BaseSettings):
+    """Service settings; every field can be set as ``VGN_<FIELD>`` (e.g. ``VGN_MODEL``)."""
+
+    model_config = SettingsConfigDict(env_prefix="VGN_", extra="ignore")
+
+    model: Path | None = Field(
+        default=None,
+        description="weights file (.safetensors preferred, or a .pt/.pth state_dict); "
+        "when unset the packaged default is used if one ships",
+    )
+    device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device")
+    torch_threads: int | None = Field(default=None, ge=1, description="torch intra-op threads")
+    max_sessions: int = Field(default=64, ge=1)
+    session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")
+    max_frame_bytes: int = Field(default=32 * 1024 * 1024, ge=1024, description="largest request body")
+    api_key: str | None = Field(default=None, description="when set, required as X-API-Key or Bearer token")
+    cloud_resolution: int = Field(
+        default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
+    )
+
+    def model_path(self) -> Path | None:
+        """The weights to load: ``VGN_MODEL``, else the packaged default if it exists."""
+        if self.model is not None:
+            return self.model
+        return PACKAGED_MODEL if PACKAGED_MODEL.exists() else None

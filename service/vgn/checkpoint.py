@@ -1,0 +1,66 @@
+"""Loading VGN weights safely: safetensors, or a plain PyTorch state_dict (never a pickle of
+arbitrary objects)."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import torch
+from safetensors.torch import load_file, save_file
+
+from service.vgn.network import VGN
+
+STATE_DICT_SUFFIXES = {".pt", ".pth"}
+
+
+class CheckpointError(Exception):
+    """The weights file is missing, unreadable, or does not fit the VGN architecture."""
+
+
+def weights_id(path: Path) -> str:
+    """Content id of a weights file: the first 12 hex digits of its sha256."""
+    digest = hashlib.sha256()
+    with path.open("rb") as stream:
+        for block in iter(lambda: stream.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:12]
+
+
+def read_state_dict(path: Path) -> dict[str, torch.Tensor]:
+    """Tensors of a ``.safetensors`` or ``.pt``/``.pth`` file (loaded with ``weights_only``)."""
+    if not path.is_file():
+        raise CheckpointError(f"weights file {path} does not exist")
+    try:
+        if path.suffix == ".safetensors":
+            return load_file(str(path), device="cpu")
+        if path.suffix in STATE_DICT_SUFFIXES:
+            state = torch.load(path, map_location="cpu", weights_only=True)
+            if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
+                state = state["state_dict"]
+            if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+                raise CheckpointError(f"{path} does not hold a state_dict of tensors")
+            return state
+    except CheckpointError:
+        raise
+    except Exception as error:  # safetensors, pickle and zip errors have no common base
+        raise CheckpointError(f"cannot read weights from {path}: {error}") from None
+    raise CheckpointError(f"unknown weights format {path.suffix!r}: use .safetensors, .pt or .pth")
+
+
+def load_vgn(path: Path) -> VGN:
+    """A VGN network with the weights of ``path``, loaded strictly, in eval mode on the CPU."""
+    network = VGN()
+    try:
+        network.load_state_dict(read_state_dict(path), strict=True)
+    except RuntimeError as error:
+        raise CheckpointError(f"{path} does not fit the VGN architecture: {error}") from None
+    return network.eval()
+
+
+def save_vgn(network: VGN, path: Path) -> None:
+    """Write ``network``'s weights as safetensors, atomically (temp file + rename)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(path.name + ".tmp")
+    save_file({k: v.detach().cpu().contiguous() for k, v in network.state_dict().items()}, str(temporary))
+    temporary.replace(path)

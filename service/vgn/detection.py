@@ -1,0 +1,124 @@
+"""From the network's voxel-wise output to ranked grasps in the world frame (DESIGN §4)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial.transform import Rotation
+
+from client.schemas import Grasp
+
+#: Grid values strictly between these are observed voxels behind (inside) the surface.
+_INSIDE_LOW, _SURFACE = 1e-3, 0.5
+
+
+@dataclass(frozen=True)
+class DetectionConfig:
+    """Detection knobs. Defaults are VGN's; crop and cone are optional filters.
+
+    ``crop_min``/``crop_max`` are corners of a box in the workspace frame (metres);
+    ``approach`` is a world-frame direction and ``max_approach_angle`` its cone half-angle
+    in radians.
+    """
+
+    threshold: float = 0.9
+    nms_size: int = 4
+    max_grasps: int | None = None
+    smoothing_sigma: float = 1.0
+    min_width_voxels: float = 1.33
+    max_width_voxels: float = 9.33
+    surface_dilation: int = 2
+    crop_min: tuple[float, float, float] | None = None
+    crop_max: tuple[float, float, float] | None = None
+    approach: tuple[float, float, float] | None = None
+    max_approach_angle: float | None = None
+
+
+def detect_grasps(
+    grid: np.ndarray,
+    quality: np.ndarray,
+    rotation: np.ndarray,
+    width: np.ndarray,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+    config: DetectionConfig = DetectionConfig(),
+) -> list[Grasp]:
+    """Ranked grasps, best first, in the world frame.
+
+    Args:
+        grid: (N, N, N) network input (DESIGN §2 semantics), workspace frame.
+        quality: (N, N, N) raw quality in [0, 1].
+        rotation: (4, N, N, N) unit quaternions [x, y, z, w], grasp → workspace frame.
+        width: (N, N, N) opening widths in voxels.
+        voxel_size: metres per voxel; voxel (i, j, k) sits at (i, j, k) * voxel_size.
+        workspace_pose: 4×4 workspace → world.
+    """
+    score = _valid_quality(grid, quality, width, config)
+    if config.crop_min is not None or config.crop_max is not None:
+        score *= _crop_mask(score.shape, voxel_size, config)
+    candidates = np.argwhere(score > 0)
+    if config.approach is not None and len(candidates):
+        outside_cone = ~_inside_cone(candidates, rotation, workspace_pose, config)
+        score[tuple(candidates[outside_cone].T)] = 0.0
+    peaks = score == ndimage.maximum_filter(score, size=config.nms_size)
+    indices = np.argwhere(peaks & (score > 0))
+    order = np.argsort(-score[tuple(indices.T)], kind="stable")
+    if config.max_grasps is not None:
+        order = order[: config.max_grasps]
+    return _to_world(indices[order], score, rotation, width, voxel_size, workspace_pose)
+
+
+def _valid_quality(grid: np.ndarray, quality: np.ndarray, width: np.ndarray, config: DetectionConfig):
+    """Smoothed quality, zero where no grasp may be: away from the observed free space near
+    the surface, at implausible widths, or below the threshold."""
+    score = ndimage.gaussian_filter(quality.astype(np.float32), config.smoothing_sigma, mode="nearest")
+    outside = grid > _SURFACE
+    inside = (grid > _INSIDE_LOW) & (grid < _SURFACE)
+    near_surface = ndimage.binary_dilation(outside, iterations=config.surface_dilation, mask=~inside)
+    plausible = (width >= config.min_width_voxels) & (width <= config.max_width_voxels)
+    score[~(near_surface & plausible) | (score < config.threshold)] = 0.0
+    return score
+
+
+def _crop_mask(shape: tuple[int, ...], voxel_size: float, config: DetectionConfig) -> np.ndarray:
+    positions = np.indices(shape).transpose(1, 2, 3, 0) * voxel_size
+    mask = np.ones(shape, dtype=bool)
+    if config.crop_min is not None:
+        mask &= np.all(positions >= np.asarray(config.crop_min), axis=-1)
+    if config.crop_max is not None:
+        mask &= np.all(positions <= np.asarray(config.crop_max), axis=-1)
+    return mask
+
+
+def _inside_cone(candidates, rotation, workspace_pose, config: DetectionConfig) -> np.ndarray:
+    quaternions = rotation[(slice(None), *candidates.T)].T
+    approach_ws = Rotation.from_quat(quaternions).apply([0.0, 0.0, 1.0])
+    approach_world = approach_ws @ workspace_pose[:3, :3].T
+    direction = np.asarray(config.approach, dtype=np.float64)
+    direction /= np.linalg.norm(direction)
+    cosine = np.clip(approach_world @ direction, -1.0, 1.0)
+    return np.arccos(cosine) <= config.max_approach_angle
+
+
+def _to_world(indices, score, rotation, width, voxel_size, workspace_pose) -> list[Grasp]:
+    if not len(indices):
+        return []
+    index = tuple(indices.T)
+    positions = indices * voxel_size @ workspace_pose[:3, :3].T + workspace_pose[:3, 3]
+    orientations = Rotation.from_matrix(workspace_pose[:3, :3]) * Rotation.from_quat(rotation[(slice(None), *index)].T)
+    approaches = orientations.apply([0.0, 0.0, 1.0])
+    quaternions = orientations.as_quat()
+    widths = width[index] * voxel_size
+    qualities = np.clip(score[index], 0.0, 1.0)
+    return [
+        Grasp(
+            position=positions[n].tolist(),
+            orientation=quaternions[n].tolist(),
+            approach=approaches[n].tolist(),
+            width=float(widths[n]),
+            quality=float(qualities[n]),
+        )
+        for n in range(len(indices))
+    ]

@@ -1,0 +1,1 @@
+"""PyBullet simulation worker: drives the service through the client library (see issue 3)."""
