@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 #: Where a packaged default model would live; the service uses it when ``VGN_MODEL`` is unset.
@@ -31,6 +31,12 @@ class Settings(BaseSettings):
     cloud_resolution: int = Field(
         default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
     )
+
+    @field_validator("model", "api_key", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, value: object) -> object:
+        """``VGN_API_KEY=`` or ``VGN_MODEL=`` in an env file means "not set"."""
+        return None if value == "" else value
 
     def model_path(self) -> Path | None:
         """The weights to load: ``VGN_MODEL``, else the packaged default if it exists."""

@@ -1,0 +1,123 @@
+"""``vgn-client``: talk to a grasp-planning service, or start one.
+
+    vgn-client serve                      # run the service on 127.0.0.1:8000 (needs the [service] extra)
+    vgn-client status                     # health, readiness and model of a running service
+    vgn-client sessions                   # list live sessions
+    vgn-client grasps SESSION --top 5     # best grasps of a session as a table
+
+``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from collections.abc import Sequence
+
+import httpx
+
+from client.http import DEFAULT_URL, VGNClient, VGNError
+
+
+def _add_connection(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--url", default=os.environ.get("VGN_URL", DEFAULT_URL),
+                        help="service address (env VGN_URL; default %(default)s)")
+    parser.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"),
+                        help="API key, if the service requires one (env VGN_API_KEY)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="vgn-client", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    serve = commands.add_parser("serve", help="run the service (uvicorn service.app:app)")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--model", help="weights file (sets VGN_MODEL)")
+
+    status = commands.add_parser("status", help="health, readiness and model of a service")
+    _add_connection(status)
+
+    sessions = commands.add_parser("sessions", help="list live sessions")
+    _add_connection(sessions)
+
+    grasps = commands.add_parser("grasps", help="plan grasps on a session and print them")
+    _add_connection(grasps)
+    grasps.add_argument("session_id")
+    grasps.add_argument("--threshold", type=float, default=0.9, help="minimum quality (default %(default)s)")
+    grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
+    grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
+    return parser
+
+
+def _serve(args: argparse.Namespace) -> int:
+    try:
+        import uvicorn
+    except ImportError:
+        print("serving needs the service extra: pip install 'vgn-service[service]'", file=sys.stderr)
+        return 2
+    if args.model:
+        os.environ["VGN_MODEL"] = args.model
+    uvicorn.run("service.app:app", host=args.host, port=args.port)
+    return 0
+
+
+def _status(vgn: VGNClient) -> int:
+    vgn.health()
+    readiness = vgn.ready()
+    model = vgn.model()
+    print(f"service   {vgn.url}: up")
+    print(f"ready     {readiness.ready} ({readiness.detail})")
+    print(f"model     {model.model_id or '-'} from {model.source or '-'} on {model.device}")
+    return 0 if readiness.ready else 1
+
+
+def _sessions(vgn: VGNClient) -> int:
+    listing = vgn.sessions()
+    print(f"{len(listing.sessions)} of at most {listing.max_sessions} sessions")
+    for s in listing.sessions:
+        print(f"  {s.session_id:34s} frames {s.frame_count:4d}  size {s.workspace.size:.3f} m"
+              f"  resolution {s.workspace.resolution}")
+    return 0
+
+
+def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
+    result = vgn.grasps(args.session_id, threshold=args.threshold, max_grasps=args.top)
+    if args.json:
+        print(result.model_dump_json(indent=2))
+        return 0
+    print(f"{len(result.grasps)} grasps in {result.planning_ms:.1f} ms (model {result.model}, "
+          f"{result.frame_count} frames)")
+    print(f"{'#':>3} {'quality':>7} {'x':>7} {'y':>7} {'z':>7} {'width':>6}  approach")
+    for rank, g in enumerate(result.grasps, 1):
+        x, y, z = g.position
+        approach = ", ".join(f"{a:+.2f}" for a in g.approach)
+        print(f"{rank:>3} {g.quality:7.3f} {x:7.3f} {y:7.3f} {z:7.3f} {g.width:6.3f}  [{approach}]")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.command == "serve":
+        return _serve(args)
+    try:
+        with VGNClient(args.url, api_key=args.api_key) as vgn:
+            if args.command == "status":
+                return _status(vgn)
+            if args.command == "sessions":
+                return _sessions(vgn)
+            return _grasps(vgn, args)
+    except VGNError as error:
+        detail = error.detail if isinstance(error.detail, str) else json.dumps(error.detail)
+        print(f"error: the service answered {error.status}: {detail}", file=sys.stderr)
+        return 1
+    except httpx.TransportError as error:
+        print(f"error: cannot reach the service at {args.url}: {error}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

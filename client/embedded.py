@@ -1,0 +1,92 @@
+"""Start the service in its own process on a free loopback port, for when no URL is given.
+
+The client package does not import the service: it runs ``python -m uvicorn service.app:app``
+in a child process, so it needs the ``service`` extra installed but keeps this process free
+of torch and open3d.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import httpx
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind((host, 0))
+        return probe.getsockname()[1]
+
+
+class EmbeddedService:
+    """A uvicorn child process serving ``service.app:app``; a context manager that stops it.
+
+    ``env`` adds ``VGN_*`` settings (e.g. ``{"VGN_MODEL": path}``) to the child's environment.
+    """
+
+    def __init__(self, model: Path | str | None = None, env: dict[str, str] | None = None,
+                 host: str = "127.0.0.1", port: int | None = None, startup_timeout: float = 120.0,
+                 log_path: Path | None = None) -> None:
+        self.host, self.port = host, port or free_port(host)
+        self.url = f"http://{host}:{self.port}"
+        self._env = {**os.environ, **(env or {})}
+        if model is not None:
+            self._env["VGN_MODEL"] = str(model)
+        self._startup_timeout = startup_timeout
+        self._log_path = log_path
+        self._process: subprocess.Popen | None = None
+
+    def start(self) -> EmbeddedService:
+        command = [sys.executable, "-m", "uvicorn", "service.app:app", "--host", self.host,
+                   "--port", str(self.port), "--log-level", "warning"]
+        # A file, not a pipe: a pipe nobody reads would block a chatty child.
+        self._log = open(self._log_path, "ab") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
+        self._process = subprocess.Popen(command, env=self._env, stdout=self._log, stderr=self._log)
+        self._wait_until_up()
+        return self
+
+    def _wait_until_up(self) -> None:
+        assert self._process is not None
+        deadline = time.monotonic() + self._startup_timeout
+        while time.monotonic() < deadline:
+            if self._process.poll() is not None:
+                raise RuntimeError(f"the embedded service exited with code {self._process.returncode}:\n"
+                                   f"{self._log_tail()}")
+            try:
+                if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            time.sleep(0.1)
+        self.stop()
+        raise TimeoutError(f"the embedded service did not answer within {self._startup_timeout:g} s")
+
+    def _log_tail(self, size: int = 4000) -> str:
+        self._log.flush()
+        self._log.seek(max(0, self._log.seek(0, os.SEEK_END) - size))
+        return self._log.read().decode(errors="replace")
+
+    def stop(self) -> None:
+        if self._process is None:
+            return
+        if self._process.poll() is None:
+            self._process.terminate()
+            try:
+                self._process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self._process.kill()
+                self._process.wait()
+        self._log.close()
+        self._process = None
+
+    def __enter__(self) -> EmbeddedService:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

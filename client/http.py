@@ -1,0 +1,301 @@
+"""Typed Python clients (sync and async) for the grasp-planning API.
+
+Both clients share the request builders and response parsers below, so they only differ in
+how they send a request. Neither needs torch, open3d or pybullet.
+
+    with VGNClient("http://127.0.0.1:8000") as vgn:
+        session = vgn.create_session(intrinsics=Intrinsics(width=640, height=480, fx=540, fy=540, cx=320, cy=240))
+        vgn.add_frame(session.session_id, depth, camera_pose)   # depth (H, W) metres, pose 4x4 camera->world
+        best = vgn.grasps(session.session_id).grasps[0]
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Generic, TypeVar
+
+import httpx
+import numpy as np
+
+from client.schemas import (
+    FrameMeta,
+    FrameResult,
+    GraspQuery,
+    GraspResult,
+    Intrinsics,
+    ModelInfo,
+    Pose,
+    Readiness,
+    SessionCreate,
+    SessionInfo,
+    SessionList,
+    Workspace,
+)
+
+T = TypeVar("T")
+DEFAULT_URL = "http://127.0.0.1:8000"
+
+
+class VGNError(Exception):
+    """The service answered with an error; ``status`` and ``detail`` say what and why."""
+
+    def __init__(self, status: int, detail: Any, message: str | None = None) -> None:
+        self.status, self.detail = status, detail
+        super().__init__(f"HTTP {status}: {message or detail}")
+
+
+class BadRequest(VGNError):
+    """400/415/422: the request was malformed; nothing changed on the service."""
+
+
+class Unauthorized(VGNError):
+    """401: the API key is missing or wrong."""
+
+
+class NotFound(VGNError):
+    """404: unknown (or expired) session."""
+
+
+class Conflict(VGNError):
+    """409: a session with that id exists already."""
+
+
+class PayloadTooLarge(VGNError):
+    """413: the body exceeds the service's VGN_MAX_FRAME_BYTES."""
+
+
+class ServiceUnavailable(VGNError):
+    """503: no model loaded, or the session limit is reached with every session busy."""
+
+
+_ERROR_TYPES = {400: BadRequest, 401: Unauthorized, 404: NotFound, 409: Conflict, 413: PayloadTooLarge,
+                415: BadRequest, 422: BadRequest, 503: ServiceUnavailable}
+
+
+def raise_for_error(response: httpx.Response) -> httpx.Response:
+    if response.is_success:
+        return response
+    try:
+        body = response.json()
+        detail, message = body.get("detail", body), body.get("message")
+    except (ValueError, AttributeError):
+        detail, message = response.text, None
+    raise _ERROR_TYPES.get(response.status_code, VGNError)(response.status_code, detail, message)
+
+
+@dataclass
+class Call(Generic[T]):
+    """One API call: what to send and how to read the answer."""
+
+    method: str
+    path: str
+    parse: Callable[[httpx.Response], T]
+    kwargs: dict[str, Any] = field(default_factory=dict)
+
+
+def _model(kind: type[T]) -> Callable[[httpx.Response], T]:
+    return lambda response: kind.model_validate_json(response.content)  # type: ignore[attr-defined]
+
+
+def _npy(response: httpx.Response) -> np.ndarray:
+    return np.load(io.BytesIO(response.content), allow_pickle=False)
+
+
+def as_pose(pose: Pose | np.ndarray | dict) -> Pose:
+    """A ``Pose`` from a Pose, a 4×4 matrix or a dict (checked for rigidity and unit quaternions)."""
+    if isinstance(pose, Pose):
+        return pose
+    if isinstance(pose, dict):
+        return Pose.model_validate(pose)
+    return Pose.from_matrix(np.asarray(pose))
+
+
+def encode_depth(depth: np.ndarray | bytes) -> tuple[bytes, str, str]:
+    """(body, filename, media type) of a depth image.
+
+    float arrays (metres, NaN/0 = no reading) go raw as little-endian float32; uint16 arrays
+    are PNG-encoded (needs Pillow); bytes are taken as an already encoded 16-bit PNG.
+    """
+    if isinstance(depth, bytes | bytearray):
+        return bytes(depth), "depth.png", "image/png"
+    array = np.asarray(depth)
+    if array.ndim != 2:
+        raise ValueError(f"depth must be a 2-D (H, W) array, got shape {array.shape}")
+    if array.dtype == np.uint16:
+        try:
+            from PIL import Image
+        except ImportError as error:
+            raise ImportError("encoding uint16 depth as PNG needs Pillow (pip install pillow)") from error
+        buffer = io.BytesIO()
+        Image.fromarray(array).save(buffer, format="PNG")
+        return buffer.getvalue(), "depth.png", "image/png"
+    if not np.issubdtype(array.dtype, np.floating):
+        raise ValueError(f"depth must be float metres or uint16 PNG units, got dtype {array.dtype}")
+    return np.ascontiguousarray(array, dtype="<f4").tobytes(), "depth.raw", "application/octet-stream"
+
+
+class Calls:
+    """Request builders for every endpoint; shared by the sync and async clients."""
+
+    @staticmethod
+    def create_session(session_id: str | None = None, workspace: Workspace | None = None,
+                       intrinsics: Intrinsics | None = None) -> Call[SessionInfo]:
+        spec = SessionCreate(session_id=session_id, workspace=workspace or Workspace(), intrinsics=intrinsics)
+        return Call("POST", "/sessions", _model(SessionInfo), {"json": spec.model_dump(mode="json")})
+
+    @staticmethod
+    def add_frame(session_id: str, depth: np.ndarray | bytes, camera_pose: Pose | np.ndarray,
+                  intrinsics: Intrinsics | None = None, depth_scale: float = 1000.0,
+                  max_depth: float = 2.0) -> Call[FrameResult]:
+        meta = FrameMeta(camera_pose=as_pose(camera_pose), intrinsics=intrinsics,
+                         depth_scale=depth_scale, max_depth=max_depth)
+        body, filename, media_type = encode_depth(depth)
+        files = {"meta": (None, meta.model_dump_json(), "application/json"),
+                 "depth": (filename, body, media_type)}
+        return Call("POST", f"/sessions/{session_id}/frames", _model(FrameResult), {"files": files})
+
+    @staticmethod
+    def grasps(session_id: str, **options: Any) -> Call[GraspResult]:
+        params = GraspQuery(**options).to_params()
+        return Call("GET", f"/sessions/{session_id}/grasps", _model(GraspResult), {"params": params})
+
+    @staticmethod
+    def cloud(session_id: str) -> Call[np.ndarray]:
+        return Call("GET", f"/sessions/{session_id}/cloud", _npy, {"headers": {"Accept": "application/x-npy"}})
+
+    session = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}", _model(SessionInfo)))
+    sessions = staticmethod(lambda: Call("GET", "/sessions", _model(SessionList)))
+    delete_session = staticmethod(lambda sid: Call("DELETE", f"/sessions/{sid}", lambda r: None))
+    reset_session = staticmethod(lambda sid: Call("POST", f"/sessions/{sid}/reset", _model(SessionInfo)))
+    tsdf = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}/tsdf", _npy))
+    model = staticmethod(lambda: Call("GET", "/model", _model(ModelInfo)))
+    health = staticmethod(lambda: Call("GET", "/healthz", lambda r: r.json()))
+    metrics = staticmethod(lambda: Call("GET", "/metrics", lambda r: r.text))
+
+
+def _readiness(response: httpx.Response) -> Readiness:
+    if response.status_code in (200, 503):
+        return Readiness.model_validate_json(response.content)
+    raise_for_error(response)
+    raise AssertionError("unreachable")
+
+
+def _headers(api_key: str | None) -> dict[str, str]:
+    return {"X-API-Key": api_key} if api_key else {}
+
+
+class VGNClient:
+    """Blocking client. Use as a context manager, or call ``close()``."""
+
+    def __init__(self, url: str = DEFAULT_URL, api_key: str | None = None, timeout: float = 30.0,
+                 http: httpx.Client | None = None) -> None:
+        self.url = url.rstrip("/")
+        self._http = http or httpx.Client(base_url=self.url, headers=_headers(api_key), timeout=timeout)
+
+    def _run(self, call: Call[T]) -> T:
+        return call.parse(raise_for_error(self._http.request(call.method, call.path, **call.kwargs)))
+
+    def health(self) -> dict: return self._run(Calls.health())
+    def model(self) -> ModelInfo: return self._run(Calls.model())
+    def metrics(self) -> str: return self._run(Calls.metrics())
+    def sessions(self) -> SessionList: return self._run(Calls.sessions())
+    def session(self, session_id: str) -> SessionInfo: return self._run(Calls.session(session_id))
+    def delete_session(self, session_id: str) -> None: return self._run(Calls.delete_session(session_id))
+    def reset_session(self, session_id: str) -> SessionInfo: return self._run(Calls.reset_session(session_id))
+    def tsdf(self, session_id: str) -> np.ndarray: return self._run(Calls.tsdf(session_id))
+    def cloud(self, session_id: str) -> np.ndarray: return self._run(Calls.cloud(session_id))
+
+    def ready(self) -> Readiness:
+        """Readiness without raising on 503 (``ready`` is False then, with the reason)."""
+        return _readiness(self._http.get("/readyz"))
+
+    def create_session(self, session_id: str | None = None, workspace: Workspace | None = None,
+                       intrinsics: Intrinsics | None = None) -> SessionInfo:
+        return self._run(Calls.create_session(session_id, workspace, intrinsics))
+
+    def add_frame(self, session_id: str, depth: np.ndarray | bytes, camera_pose: Pose | np.ndarray,
+                  intrinsics: Intrinsics | None = None, depth_scale: float = 1000.0,
+                  max_depth: float = 2.0) -> FrameResult:
+        """Fuse a depth image: float (H, W) metres, uint16 PNG units, or PNG bytes;
+        ``camera_pose`` camera→world (OpenCV optical frame)."""
+        return self._run(Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth))
+
+    def grasps(self, session_id: str, **options: Any) -> GraspResult:
+        """Ranked grasps; options are ``GraspQuery`` fields (threshold, max_grasps, ...)."""
+        return self._run(Calls.grasps(session_id, **options))
+
+    def wait_until_up(self, timeout: float = 60.0) -> None:
+        """Block until ``/healthz`` answers (for a service that is still starting)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                self.health()
+                return
+            except httpx.TransportError:
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"no service answered at {self.url} within {timeout:g} s") from None
+                time.sleep(0.1)
+
+    def close(self) -> None:
+        self._http.close()
+
+    def __enter__(self) -> VGNClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class AsyncVGNClient:
+    """Asyncio client with the same methods as ``VGNClient``, as coroutines."""
+
+    def __init__(self, url: str = DEFAULT_URL, api_key: str | None = None, timeout: float = 30.0,
+                 http: httpx.AsyncClient | None = None) -> None:
+        self.url = url.rstrip("/")
+        self._http = http or httpx.AsyncClient(base_url=self.url, headers=_headers(api_key), timeout=timeout)
+
+    async def _run(self, call: Call[T]) -> T:
+        return call.parse(raise_for_error(await self._http.request(call.method, call.path, **call.kwargs)))
+
+    async def health(self) -> dict: return await self._run(Calls.health())
+    async def model(self) -> ModelInfo: return await self._run(Calls.model())
+    async def metrics(self) -> str: return await self._run(Calls.metrics())
+    async def sessions(self) -> SessionList: return await self._run(Calls.sessions())
+    async def session(self, session_id: str) -> SessionInfo: return await self._run(Calls.session(session_id))
+    async def delete_session(self, session_id: str) -> None: return await self._run(Calls.delete_session(session_id))
+    async def reset_session(self, session_id: str) -> SessionInfo: return await self._run(Calls.reset_session(session_id))
+    async def tsdf(self, session_id: str) -> np.ndarray: return await self._run(Calls.tsdf(session_id))
+    async def cloud(self, session_id: str) -> np.ndarray: return await self._run(Calls.cloud(session_id))
+
+    async def ready(self) -> Readiness:
+        return _readiness(await self._http.get("/readyz"))
+
+    async def create_session(self, session_id: str | None = None, workspace: Workspace | None = None,
+                             intrinsics: Intrinsics | None = None) -> SessionInfo:
+        return await self._run(Calls.create_session(session_id, workspace, intrinsics))
+
+    async def add_frame(self, session_id: str, depth: np.ndarray | bytes, camera_pose: Pose | np.ndarray,
+                        intrinsics: Intrinsics | None = None, depth_scale: float = 1000.0,
+                        max_depth: float = 2.0) -> FrameResult:
+        return await self._run(Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth))
+
+    async def grasps(self, session_id: str, **options: Any) -> GraspResult:
+        return await self._run(Calls.grasps(session_id, **options))
+
+    async def aclose(self) -> None:
+        await self._http.aclose()
+
+    async def __aenter__(self) -> AsyncVGNClient:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.aclose()
+
+
+__all__ = [
+    "AsyncVGNClient", "BadRequest", "Conflict", "NotFound", "PayloadTooLarge", "ServiceUnavailable",
+    "Unauthorized", "VGNClient", "VGNError",
+]

@@ -1,0 +1,61 @@
+"""Shared fixtures: a random-initialised checkpoint, the app in-process, and a real uvicorn."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import torch
+
+from client.embedded import EmbeddedService
+from client.http import VGNClient
+from service.app import create_app
+from service.core import PlanningService
+from service.settings import Settings
+from service.vgn.checkpoint import save_vgn
+from service.vgn.network import VGN
+
+warnings.filterwarnings("ignore", message=".*httpx2.*")
+from fastapi.testclient import TestClient  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def random_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Small random-initialised VGN weights, for plumbing tests only (no meaningful grasps)."""
+    torch.manual_seed(0)
+    path = tmp_path_factory.mktemp("weights") / "random.safetensors"
+    save_vgn(VGN(), path)
+    return path
+
+
+@pytest.fixture
+def settings(random_checkpoint: Path) -> Settings:
+    return Settings(model=random_checkpoint, max_sessions=8, session_ttl_s=600, api_key=None)
+
+
+@pytest.fixture
+def core(settings: Settings) -> PlanningService:
+    return PlanningService.from_settings(settings)
+
+
+@pytest.fixture
+def http(core: PlanningService) -> Iterator[TestClient]:
+    """The app in-process, over the core fixture."""
+    with TestClient(create_app(core=core)) as client:
+        yield client
+
+
+@pytest.fixture(scope="session")
+def server(random_checkpoint: Path) -> Iterator[EmbeddedService]:
+    """A real uvicorn process on loopback serving the random checkpoint."""
+    env = {"VGN_MAX_FRAME_BYTES": str(4 * 1024 * 1024), "VGN_API_KEY": "", "VGN_TORCH_THREADS": "1"}
+    with EmbeddedService(model=random_checkpoint, env=env) as service:
+        yield service
+
+
+@pytest.fixture
+def vgn(server: EmbeddedService) -> Iterator[VGNClient]:
+    with VGNClient(server.url) as client:
+        yield client
