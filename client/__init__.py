@@ -17,7 +17,20 @@ from client.http import (
 from client.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
 
 __all__ = [
-    "AsyncVGNClient", "BadRequest", "Conflict", "Grasp", "GraspQuery", "GraspResult", "Intrinsics",
-    "NotFound", "PayloadTooLarge", "Pose", "ServiceUnavailable", "SessionInfo", "Unauthorized",
-    "VGNClient", "VGNError", "Workspace",
+    "AsyncVGNClient",
+    "BadRequest",
+    "Conflict",
+    "Grasp",
+    "GraspQuery",
+    "GraspResult",
+    "Intrinsics",
+    "NotFound",
+    "PayloadTooLarge",
+    "Pose",
+    "ServiceUnavailable",
+    "SessionInfo",
+    "Unauthorized",
+    "VGNClient",
+    "VGNError",
+    "Workspace",
 ]

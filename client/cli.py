@@ -22,15 +22,22 @@ from client.http import DEFAULT_URL, VGNClient, VGNError
 
 
 def _add_connection(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--url", default=os.environ.get("VGN_URL", DEFAULT_URL),
-                        help="service address (env VGN_URL; default %(default)s)")
-    parser.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"),
-                        help="API key, if the service requires one (env VGN_API_KEY)")
+    parser.add_argument(
+        "--url",
+        default=os.environ.get("VGN_URL", DEFAULT_URL),
+        help="service address (env VGN_URL; default %(default)s)",
+    )
+    parser.add_argument(
+        "--api-key",
+        default=os.environ.get("VGN_API_KEY"),
+        help="API key, if the service requires one (env VGN_API_KEY)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="vgn-client", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="vgn-client", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     serve = commands.add_parser("serve", help="run the service (uvicorn service.app:app)")
@@ -79,8 +86,10 @@ def _sessions(vgn: VGNClient) -> int:
     listing = vgn.sessions()
     print(f"{len(listing.sessions)} of at most {listing.max_sessions} sessions")
     for s in listing.sessions:
-        print(f"  {s.session_id:34s} frames {s.frame_count:4d}  size {s.workspace.size:.3f} m"
-              f"  resolution {s.workspace.resolution}")
+        print(
+            f"  {s.session_id:34s} frames {s.frame_count:4d}  size {s.workspace.size:.3f} m"
+            f"  resolution {s.workspace.resolution}"
+        )
     return 0
 
 
@@ -89,8 +98,10 @@ def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
     if args.json:
         print(result.model_dump_json(indent=2))
         return 0
-    print(f"{len(result.grasps)} grasps in {result.planning_ms:.1f} ms (model {result.model}, "
-          f"{result.frame_count} frames)")
+    print(
+        f"{len(result.grasps)} grasps in {result.planning_ms:.1f} ms (model {result.model}, "
+        f"{result.frame_count} frames)"
+    )
     print(f"{'#':>3} {'quality':>7} {'x':>7} {'y':>7} {'z':>7} {'width':>6}  approach")
     for rank, g in enumerate(result.grasps, 1):
         x, y, z = g.position

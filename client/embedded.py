@@ -30,9 +30,15 @@ class EmbeddedService:
     ``env`` adds ``VGN_*`` settings (e.g. ``{"VGN_MODEL": path}``) to the child's environment.
     """
 
-    def __init__(self, model: Path | str | None = None, env: dict[str, str] | None = None,
-                 host: str = "127.0.0.1", port: int | None = None, startup_timeout: float = 120.0,
-                 log_path: Path | None = None) -> None:
+    def __init__(
+        self,
+        model: Path | str | None = None,
+        env: dict[str, str] | None = None,
+        host: str = "127.0.0.1",
+        port: int | None = None,
+        startup_timeout: float = 120.0,
+        log_path: Path | None = None,
+    ) -> None:
         self.host, self.port = host, port or free_port(host)
         self.url = f"http://{host}:{self.port}"
         self._env = {**os.environ, **(env or {})}
@@ -43,8 +49,18 @@ class EmbeddedService:
         self._process: subprocess.Popen | None = None
 
     def start(self) -> EmbeddedService:
-        command = [sys.executable, "-m", "uvicorn", "service.app:app", "--host", self.host,
-                   "--port", str(self.port), "--log-level", "warning"]
+        command = [
+            sys.executable,
+            "-m",
+            "uvicorn",
+            "service.app:app",
+            "--host",
+            self.host,
+            "--port",
+            str(self.port),
+            "--log-level",
+            "warning",
+        ]
         # A file, not a pipe: a pipe nobody reads would block a chatty child.
         self._log = open(self._log_path, "ab") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
         self._process = subprocess.Popen(command, env=self._env, stdout=self._log, stderr=self._log)
@@ -56,8 +72,9 @@ class EmbeddedService:
         deadline = time.monotonic() + self._startup_timeout
         while time.monotonic() < deadline:
             if self._process.poll() is not None:
-                raise RuntimeError(f"the embedded service exited with code {self._process.returncode}:\n"
-                                   f"{self._log_tail()}")
+                raise RuntimeError(
+                    f"the embedded service exited with code {self._process.returncode}:\n{self._log_tail()}"
+                )
             try:
                 if httpx.get(f"{self.url}/healthz", timeout=1.0).status_code == 200:
                     return

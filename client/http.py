@@ -71,8 +71,16 @@ class ServiceUnavailable(VGNError):
     """503: no model loaded, or the session limit is reached with every session busy."""
 
 
-_ERROR_TYPES = {400: BadRequest, 401: Unauthorized, 404: NotFound, 409: Conflict, 413: PayloadTooLarge,
-                415: BadRequest, 422: BadRequest, 503: ServiceUnavailable}
+_ERROR_TYPES = {
+    400: BadRequest,
+    401: Unauthorized,
+    404: NotFound,
+    409: Conflict,
+    413: PayloadTooLarge,
+    415: BadRequest,
+    422: BadRequest,
+    503: ServiceUnavailable,
+}
 
 
 def raise_for_error(response: httpx.Response) -> httpx.Response:
@@ -141,20 +149,34 @@ class Calls:
     """Request builders for every endpoint; shared by the sync and async clients."""
 
     @staticmethod
-    def create_session(session_id: str | None = None, workspace: Workspace | None = None,
-                       intrinsics: Intrinsics | None = None) -> Call[SessionInfo]:
+    def create_session(
+        session_id: str | None = None,
+        workspace: Workspace | None = None,
+        intrinsics: Intrinsics | None = None,
+    ) -> Call[SessionInfo]:
         spec = SessionCreate(session_id=session_id, workspace=workspace or Workspace(), intrinsics=intrinsics)
         return Call("POST", "/sessions", _model(SessionInfo), {"json": spec.model_dump(mode="json")})
 
     @staticmethod
-    def add_frame(session_id: str, depth: np.ndarray | bytes, camera_pose: Pose | np.ndarray,
-                  intrinsics: Intrinsics | None = None, depth_scale: float = 1000.0,
-                  max_depth: float = 2.0) -> Call[FrameResult]:
-        meta = FrameMeta(camera_pose=as_pose(camera_pose), intrinsics=intrinsics,
-                         depth_scale=depth_scale, max_depth=max_depth)
+    def add_frame(
+        session_id: str,
+        depth: np.ndarray | bytes,
+        camera_pose: Pose | np.ndarray,
+        intrinsics: Intrinsics | None = None,
+        depth_scale: float = 1000.0,
+        max_depth: float = 2.0,
+    ) -> Call[FrameResult]:
+        meta = FrameMeta(
+            camera_pose=as_pose(camera_pose),
+            intrinsics=intrinsics,
+            depth_scale=depth_scale,
+            max_depth=max_depth,
+        )
         body, filename, media_type = encode_depth(depth)
-        files = {"meta": (None, meta.model_dump_json(), "application/json"),
-                 "depth": (filename, body, media_type)}
+        files = {
+            "meta": (None, meta.model_dump_json(), "application/json"),
+            "depth": (filename, body, media_type),
+        }
         return Call("POST", f"/sessions/{session_id}/frames", _model(FrameResult), {"files": files})
 
     @staticmethod
@@ -164,7 +186,9 @@ class Calls:
 
     @staticmethod
     def cloud(session_id: str) -> Call[np.ndarray]:
-        return Call("GET", f"/sessions/{session_id}/cloud", _npy, {"headers": {"Accept": "application/x-npy"}})
+        return Call(
+            "GET", f"/sessions/{session_id}/cloud", _npy, {"headers": {"Accept": "application/x-npy"}}
+        )
 
     session = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}", _model(SessionInfo)))
     sessions = staticmethod(lambda: Call("GET", "/sessions", _model(SessionList)))
@@ -190,35 +214,67 @@ def _headers(api_key: str | None) -> dict[str, str]:
 class VGNClient:
     """Blocking client. Use as a context manager, or call ``close()``."""
 
-    def __init__(self, url: str = DEFAULT_URL, api_key: str | None = None, timeout: float = 30.0,
-                 http: httpx.Client | None = None) -> None:
+    def __init__(
+        self,
+        url: str = DEFAULT_URL,
+        api_key: str | None = None,
+        timeout: float = 30.0,
+        http: httpx.Client | None = None,
+    ) -> None:
         self.url = url.rstrip("/")
         self._http = http or httpx.Client(base_url=self.url, headers=_headers(api_key), timeout=timeout)
 
     def _run(self, call: Call[T]) -> T:
         return call.parse(raise_for_error(self._http.request(call.method, call.path, **call.kwargs)))
 
-    def health(self) -> dict: return self._run(Calls.health())
-    def model(self) -> ModelInfo: return self._run(Calls.model())
-    def metrics(self) -> str: return self._run(Calls.metrics())
-    def sessions(self) -> SessionList: return self._run(Calls.sessions())
-    def session(self, session_id: str) -> SessionInfo: return self._run(Calls.session(session_id))
-    def delete_session(self, session_id: str) -> None: return self._run(Calls.delete_session(session_id))
-    def reset_session(self, session_id: str) -> SessionInfo: return self._run(Calls.reset_session(session_id))
-    def tsdf(self, session_id: str) -> np.ndarray: return self._run(Calls.tsdf(session_id))
-    def cloud(self, session_id: str) -> np.ndarray: return self._run(Calls.cloud(session_id))
+    def health(self) -> dict:
+        return self._run(Calls.health())
+
+    def model(self) -> ModelInfo:
+        return self._run(Calls.model())
+
+    def metrics(self) -> str:
+        return self._run(Calls.metrics())
+
+    def sessions(self) -> SessionList:
+        return self._run(Calls.sessions())
+
+    def session(self, session_id: str) -> SessionInfo:
+        return self._run(Calls.session(session_id))
+
+    def delete_session(self, session_id: str) -> None:
+        return self._run(Calls.delete_session(session_id))
+
+    def reset_session(self, session_id: str) -> SessionInfo:
+        return self._run(Calls.reset_session(session_id))
+
+    def tsdf(self, session_id: str) -> np.ndarray:
+        return self._run(Calls.tsdf(session_id))
+
+    def cloud(self, session_id: str) -> np.ndarray:
+        return self._run(Calls.cloud(session_id))
 
     def ready(self) -> Readiness:
         """Readiness without raising on 503 (``ready`` is False then, with the reason)."""
         return _readiness(self._http.get("/readyz"))
 
-    def create_session(self, session_id: str | None = None, workspace: Workspace | None = None,
-                       intrinsics: Intrinsics | None = None) -> SessionInfo:
+    def create_session(
+        self,
+        session_id: str | None = None,
+        workspace: Workspace | None = None,
+        intrinsics: Intrinsics | None = None,
+    ) -> SessionInfo:
         return self._run(Calls.create_session(session_id, workspace, intrinsics))
 
-    def add_frame(self, session_id: str, depth: np.ndarray | bytes, camera_pose: Pose | np.ndarray,
-                  intrinsics: Intrinsics | None = None, depth_scale: float = 1000.0,
-                  max_depth: float = 2.0) -> FrameResult:
+    def add_frame(
+        self,
+        session_id: str,
+        depth: np.ndarray | bytes,
+        camera_pose: Pose | np.ndarray,
+        intrinsics: Intrinsics | None = None,
+        depth_scale: float = 1000.0,
+        max_depth: float = 2.0,
+    ) -> FrameResult:
         """Fuse a depth image: float (H, W) metres, uint16 PNG units, or PNG bytes;
         ``camera_pose`` camera→world (OpenCV optical frame)."""
         return self._run(Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth))
@@ -252,35 +308,69 @@ class VGNClient:
 class AsyncVGNClient:
     """Asyncio client with the same methods as ``VGNClient``, as coroutines."""
 
-    def __init__(self, url: str = DEFAULT_URL, api_key: str | None = None, timeout: float = 30.0,
-                 http: httpx.AsyncClient | None = None) -> None:
+    def __init__(
+        self,
+        url: str = DEFAULT_URL,
+        api_key: str | None = None,
+        timeout: float = 30.0,
+        http: httpx.AsyncClient | None = None,
+    ) -> None:
         self.url = url.rstrip("/")
         self._http = http or httpx.AsyncClient(base_url=self.url, headers=_headers(api_key), timeout=timeout)
 
     async def _run(self, call: Call[T]) -> T:
         return call.parse(raise_for_error(await self._http.request(call.method, call.path, **call.kwargs)))
 
-    async def health(self) -> dict: return await self._run(Calls.health())
-    async def model(self) -> ModelInfo: return await self._run(Calls.model())
-    async def metrics(self) -> str: return await self._run(Calls.metrics())
-    async def sessions(self) -> SessionList: return await self._run(Calls.sessions())
-    async def session(self, session_id: str) -> SessionInfo: return await self._run(Calls.session(session_id))
-    async def delete_session(self, session_id: str) -> None: return await self._run(Calls.delete_session(session_id))
-    async def reset_session(self, session_id: str) -> SessionInfo: return await self._run(Calls.reset_session(session_id))
-    async def tsdf(self, session_id: str) -> np.ndarray: return await self._run(Calls.tsdf(session_id))
-    async def cloud(self, session_id: str) -> np.ndarray: return await self._run(Calls.cloud(session_id))
+    async def health(self) -> dict:
+        return await self._run(Calls.health())
+
+    async def model(self) -> ModelInfo:
+        return await self._run(Calls.model())
+
+    async def metrics(self) -> str:
+        return await self._run(Calls.metrics())
+
+    async def sessions(self) -> SessionList:
+        return await self._run(Calls.sessions())
+
+    async def session(self, session_id: str) -> SessionInfo:
+        return await self._run(Calls.session(session_id))
+
+    async def delete_session(self, session_id: str) -> None:
+        return await self._run(Calls.delete_session(session_id))
+
+    async def reset_session(self, session_id: str) -> SessionInfo:
+        return await self._run(Calls.reset_session(session_id))
+
+    async def tsdf(self, session_id: str) -> np.ndarray:
+        return await self._run(Calls.tsdf(session_id))
+
+    async def cloud(self, session_id: str) -> np.ndarray:
+        return await self._run(Calls.cloud(session_id))
 
     async def ready(self) -> Readiness:
         return _readiness(await self._http.get("/readyz"))
 
-    async def create_session(self, session_id: str | None = None, workspace: Workspace | None = None,
-                             intrinsics: Intrinsics | None = None) -> SessionInfo:
+    async def create_session(
+        self,
+        session_id: str | None = None,
+        workspace: Workspace | None = None,
+        intrinsics: Intrinsics | None = None,
+    ) -> SessionInfo:
         return await self._run(Calls.create_session(session_id, workspace, intrinsics))
 
-    async def add_frame(self, session_id: str, depth: np.ndarray | bytes, camera_pose: Pose | np.ndarray,
-                        intrinsics: Intrinsics | None = None, depth_scale: float = 1000.0,
-                        max_depth: float = 2.0) -> FrameResult:
-        return await self._run(Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth))
+    async def add_frame(
+        self,
+        session_id: str,
+        depth: np.ndarray | bytes,
+        camera_pose: Pose | np.ndarray,
+        intrinsics: Intrinsics | None = None,
+        depth_scale: float = 1000.0,
+        max_depth: float = 2.0,
+    ) -> FrameResult:
+        return await self._run(
+            Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth)
+        )
 
     async def grasps(self, session_id: str, **options: Any) -> GraspResult:
         return await self._run(Calls.grasps(session_id, **options))
@@ -296,6 +386,13 @@ class AsyncVGNClient:
 
 
 __all__ = [
-    "AsyncVGNClient", "BadRequest", "Conflict", "NotFound", "PayloadTooLarge", "ServiceUnavailable",
-    "Unauthorized", "VGNClient", "VGNError",
+    "AsyncVGNClient",
+    "BadRequest",
+    "Conflict",
+    "NotFound",
+    "PayloadTooLarge",
+    "ServiceUnavailable",
+    "Unauthorized",
+    "VGNClient",
+    "VGNError",
 ]

@@ -84,8 +84,7 @@ class Intrinsics(_Model):
     def _principal_point_inside(self) -> Intrinsics:
         if not (0 < self.cx < self.width and 0 < self.cy < self.height):
             raise ValueError(
-                f"principal point ({self.cx}, {self.cy}) must lie inside the "
-                f"{self.width}x{self.height} image"
+                f"principal point ({self.cx}, {self.cy}) must lie inside the {self.width}x{self.height} image"
             )
         return self
 
@@ -188,8 +187,10 @@ class GraspQuery(_Model):
     @model_validator(mode="after")
     def _consistent(self) -> GraspQuery:
         crop_min, crop_max = self.crop_box or (None, None)
-        if crop_min is not None and crop_max is not None and any(
-            lo >= hi for lo, hi in zip(crop_min, crop_max, strict=True)
+        if (
+            crop_min is not None
+            and crop_max is not None
+            and any(lo >= hi for lo, hi in zip(crop_min, crop_max, strict=True))
         ):
             raise ValueError(f"crop_min {crop_min} must be below crop_max {crop_max} on every axis")
         direction = self.approach_direction

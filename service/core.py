@@ -23,8 +23,8 @@ from client.schemas import (
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady
 from service.planner import NO_MODEL_MESSAGE, GraspPlanner
-from service.settings import Settings
 from service.sessions import SessionStore
+from service.settings import Settings
 
 CONVENTIONS = {
     "units": "metres, seconds; angles in query parameters in degrees",
@@ -72,7 +72,9 @@ class PlanningService:
             return session.info(self.sessions.ttl_s)
 
     # Frames -------------------------------------------------------------------------------
-    def add_encoded_frame(self, session_id: str, data: bytes, media_type: str, meta: FrameMeta) -> FrameResult:
+    def add_encoded_frame(
+        self, session_id: str, data: bytes, media_type: str, meta: FrameMeta
+    ) -> FrameResult:
         """Decode an uploaded depth image (PNG or raw float32) and fuse it.
 
         The image is decoded and checked before the session is touched, so a rejected frame
@@ -97,7 +99,9 @@ class PlanningService:
         intrinsics = self._frame_intrinsics(session_id, intrinsics)
         depth = np.asarray(depth)
         if depth.shape != (intrinsics.height, intrinsics.width):
-            raise InvalidInput(f"depth has shape {depth.shape}, intrinsics say {(intrinsics.height, intrinsics.width)}")
+            raise InvalidInput(
+                f"depth has shape {depth.shape}, intrinsics say {(intrinsics.height, intrinsics.width)}"
+            )
         depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
@@ -105,8 +109,9 @@ class PlanningService:
             elapsed_ms = (time.perf_counter() - started) * 1e3
             session.frame_count += 1
             session.integration_ms += elapsed_ms
-            return FrameResult(session_id=session_id, frame_count=session.frame_count,
-                               integration_ms=round(elapsed_ms, 3))
+            return FrameResult(
+                session_id=session_id, frame_count=session.frame_count, integration_ms=round(elapsed_ms, 3)
+            )
 
     def _frame_intrinsics(self, session_id: str, intrinsics: Intrinsics | None) -> Intrinsics:
         if intrinsics is not None:

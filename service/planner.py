@@ -17,9 +17,7 @@ from service.vgn.checkpoint import load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.network import PARAMETER_COUNT, VGN
 
-NO_MODEL_MESSAGE = (
-    "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
-)
+NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 
 
 def detection_config(query: GraspQuery) -> DetectionConfig:
@@ -106,7 +104,12 @@ class GraspPlanner:
         started = time.perf_counter()
         output = self.infer(grid)
         grasps: list[Grasp] = detect_grasps(
-            grid, output.quality, output.rotation, output.width, voxel_size, workspace_pose,
+            grid,
+            output.quality,
+            output.rotation,
+            output.width,
+            voxel_size,
+            workspace_pose,
             detection_config(query),
         )
         return grasps, (time.perf_counter() - started) * 1e3

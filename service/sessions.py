@@ -55,8 +55,9 @@ class SessionStore:
     session is in use the creation fails with ``CapacityExceeded``.
     """
 
-    def __init__(self, max_sessions: int, ttl_s: float, cloud_resolution: int,
-                 clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self, max_sessions: int, ttl_s: float, cloud_resolution: int, clock: Callable[[], float] = time.time
+    ) -> None:
         self.max_sessions = max_sessions
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
@@ -67,8 +68,9 @@ class SessionStore:
     def create(self, spec: SessionCreate) -> Session:
         now = self._clock()
         workspace = spec.workspace
-        volume = SceneVolume(workspace.size, workspace.resolution, workspace.pose.as_matrix(),
-                             self._cloud_resolution)
+        volume = SceneVolume(
+            workspace.size, workspace.resolution, workspace.pose.as_matrix(), self._cloud_resolution
+        )
         with self._lock:
             self._drop_expired(now)
             session_id = spec.session_id or uuid.uuid4().hex

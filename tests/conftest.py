@@ -23,10 +23,15 @@ from fastapi.testclient import TestClient  # noqa: E402
 
 @pytest.fixture(scope="session")
 def random_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Small random-initialised VGN weights, for plumbing tests only (no meaningful grasps)."""
+    """Random-initialised VGN weights for plumbing tests (no meaningful grasps). The width
+    head is biased to ~4 voxels so detection's width filter lets grasps through."""
     torch.manual_seed(0)
+    network = VGN()
+    with torch.no_grad():
+        network.conv_width.weight.mul_(0.01)
+        network.conv_width.bias.fill_(4.0)
     path = tmp_path_factory.mktemp("weights") / "random.safetensors"
-    save_vgn(VGN(), path)
+    save_vgn(network, path)
     return path
 
 

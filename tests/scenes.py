@@ -28,11 +28,15 @@ class BoxScene:
         """(H, W) float32 depth (z in the camera frame, metres) seen from ``camera_pose``
         (camera → world, OpenCV optical frame); 0 where a ray hits nothing."""
         u, v = np.meshgrid(np.arange(intrinsics.width), np.arange(intrinsics.height))
-        rays_cam = np.stack([(u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy,
-                             np.ones(u.shape)], axis=-1)  # z = 1, so the ray parameter is the depth
+        rays_cam = np.stack(
+            [(u - intrinsics.cx) / intrinsics.fx, (v - intrinsics.cy) / intrinsics.fy, np.ones(u.shape)],
+            axis=-1,
+        )  # z = 1, so the ray parameter is the depth
         rays = rays_cam @ camera_pose[:3, :3].T
         origin = camera_pose[:3, 3]
-        t_table = np.where(rays[..., 2] < 0, (TABLE_Z - origin[2]) / np.where(rays[..., 2] < 0, rays[..., 2], -1), np.inf)
+        t_table = np.where(
+            rays[..., 2] < 0, (TABLE_Z - origin[2]) / np.where(rays[..., 2] < 0, rays[..., 2], -1), np.inf
+        )
         t_box = self._box_hits(origin, rays)
         depth = np.minimum(t_table, t_box)
         return np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
@@ -58,12 +62,18 @@ class BoxScene:
         return np.minimum(to_box, to_table)
 
 
-def circle_views(count: int = 6, distance: float = 0.6, tilt_deg: float = 30.0,
-                 centre: tuple[float, float, float] = (0.15, 0.15, 0.0)) -> list[np.ndarray]:
+def circle_views(
+    count: int = 6,
+    distance: float = 0.6,
+    tilt_deg: float = 30.0,
+    centre: tuple[float, float, float] = (0.15, 0.15, 0.0),
+) -> list[np.ndarray]:
     """VGN's evaluation views: cameras on a circle, ``tilt_deg`` from vertical, looking at ``centre``."""
     tilt = np.radians(tilt_deg)
     poses = []
     for azimuth in np.linspace(0, 2 * np.pi, count, endpoint=False):
-        offset = distance * np.array([np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)])
+        offset = distance * np.array(
+            [np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), np.cos(tilt)]
+        )
         poses.append(look_at(np.asarray(centre) + offset, centre))
     return poses

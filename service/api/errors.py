@@ -66,8 +66,11 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(StarletteHTTPException)
     async def _http_error(_: Request, error: StarletteHTTPException) -> JSONResponse:
-        return JSONResponse(status_code=error.status_code, content={"detail": error.detail},
-                            headers=getattr(error, "headers", None))
+        return JSONResponse(
+            status_code=error.status_code,
+            content={"detail": error.detail},
+            headers=getattr(error, "headers", None),
+        )
 
     @app.exception_handler(BodyTooLarge)
     async def _too_large(_: Request, error: BodyTooLarge) -> JSONResponse:

@@ -14,14 +14,31 @@ LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0,
 class ServiceMetrics:
     def __init__(self) -> None:
         self.registry = CollectorRegistry()
-        self.requests = Counter("vgn_requests_total", "HTTP requests by route and status",
-                                ["method", "route", "status"], registry=self.registry)
-        self.latency = Histogram("vgn_request_duration_seconds", "HTTP request latency",
-                                 ["method", "route"], buckets=LATENCY_BUCKETS, registry=self.registry)
-        self.integration = Histogram("vgn_integration_seconds", "TSDF integration time per frame",
-                                     buckets=LATENCY_BUCKETS, registry=self.registry)
-        self.planning = Histogram("vgn_planning_seconds", "grid read-out + network + detection time",
-                                  buckets=LATENCY_BUCKETS, registry=self.registry)
+        self.requests = Counter(
+            "vgn_requests_total",
+            "HTTP requests by route and status",
+            ["method", "route", "status"],
+            registry=self.registry,
+        )
+        self.latency = Histogram(
+            "vgn_request_duration_seconds",
+            "HTTP request latency",
+            ["method", "route"],
+            buckets=LATENCY_BUCKETS,
+            registry=self.registry,
+        )
+        self.integration = Histogram(
+            "vgn_integration_seconds",
+            "TSDF integration time per frame",
+            buckets=LATENCY_BUCKETS,
+            registry=self.registry,
+        )
+        self.planning = Histogram(
+            "vgn_planning_seconds",
+            "grid read-out + network + detection time",
+            buckets=LATENCY_BUCKETS,
+            registry=self.registry,
+        )
         self.grasps = Counter("vgn_grasps_returned_total", "grasps returned", registry=self.registry)
         self.sessions = Gauge("vgn_sessions", "live sessions", registry=self.registry)
         self.model_loaded = Gauge("vgn_model_loaded", "1 when a model is loaded", registry=self.registry)

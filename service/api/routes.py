@@ -58,8 +58,11 @@ def require_api_key(
     if given is None or not secrets.compare_digest(given.encode(), expected.encode()):
         from fastapi import HTTPException
 
-        raise HTTPException(401, "missing or wrong API key (X-API-Key or Authorization: Bearer)",
-                            headers={"WWW-Authenticate": "Bearer"})
+        raise HTTPException(
+            401,
+            "missing or wrong API key (X-API-Key or Authorization: Bearer)",
+            headers={"WWW-Authenticate": "Bearer"},
+        )
 
 
 Core = Annotated[PlanningService, Depends(core)]
@@ -137,9 +140,15 @@ FRAME_BODY = {
                     "type": "object",
                     "required": ["meta", "depth"],
                     "properties": {
-                        "meta": {"type": "string", "description": "JSON FrameMeta (camera_pose, intrinsics, depth_scale, max_depth)"},
-                        "depth": {"type": "string", "format": "binary",
-                                  "description": "16-bit PNG (image/png) or float32 metres (application/octet-stream)"},
+                        "meta": {
+                            "type": "string",
+                            "description": "JSON FrameMeta (camera_pose, intrinsics, depth_scale, max_depth)",
+                        },
+                        "depth": {
+                            "type": "string",
+                            "format": "binary",
+                            "description": "16-bit PNG (image/png) or float32 metres (application/octet-stream)",
+                        },
                     },
                 }
             }
@@ -153,10 +162,13 @@ async def add_frame(service: Core, session_id: str, request: Request):
     """Fuse one depth frame. Multipart parts: ``meta`` (JSON) and ``depth`` (a file part)."""
     media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media_type != "multipart/form-data":
-        raise UnsupportedMediaType(f"frames must be multipart/form-data, got {media_type or 'no content type'!r}")
+        raise UnsupportedMediaType(
+            f"frames must be multipart/form-data, got {media_type or 'no content type'!r}"
+        )
     try:
-        form = await request.form(max_files=4, max_fields=8,
-                                  max_part_size=request.app.state.settings.max_frame_bytes)
+        form = await request.form(
+            max_files=4, max_fields=8, max_part_size=request.app.state.settings.max_frame_bytes
+        )
     except MultiPartException as error:
         raise InvalidInput(f"malformed multipart body: {error.message}") from None
     try:
@@ -173,8 +185,9 @@ async def add_frame(service: Core, session_id: str, request: Request):
 
 
 @api.get("/sessions/{session_id}/grasps", response_model=GraspResult)
-def grasps(service: Core, session_id: str, request: Request,
-           query: Annotated[GraspQuery, Query()]) -> GraspResult:
+def grasps(
+    service: Core, session_id: str, request: Request, query: Annotated[GraspQuery, Query()]
+) -> GraspResult:
     """Ranked grasps, best first, in the world frame, planned by VGN on the fused volume."""
     result = service.plan(session_id, query)
     metrics(request).planning.observe(result.planning_ms / 1e3)
@@ -200,15 +213,19 @@ def _npy(array: np.ndarray) -> bytes:
     return buffer.getvalue()
 
 
-@api.get("/sessions/{session_id}/tsdf", response_class=Response,
-         responses={200: {"content": {NPY_MEDIA_TYPE: {}}}})
+@api.get(
+    "/sessions/{session_id}/tsdf", response_class=Response, responses={200: {"content": {NPY_MEDIA_TYPE: {}}}}
+)
 def tsdf(service: Core, session_id: str) -> Response:
     """The (N, N, N) float32 network input as ``.npy``, indexed [x, y, z] in the workspace frame."""
     return Response(_npy(service.grid(session_id)), media_type=NPY_MEDIA_TYPE)
 
 
-@api.get("/sessions/{session_id}/cloud", response_class=Response,
-         responses={200: {"content": {NPY_MEDIA_TYPE: {}, PLY_MEDIA_TYPE: {}}}, 406: {"model": ErrorResponse}})
+@api.get(
+    "/sessions/{session_id}/cloud",
+    response_class=Response,
+    responses={200: {"content": {NPY_MEDIA_TYPE: {}, PLY_MEDIA_TYPE: {}}}, 406: {"model": ErrorResponse}},
+)
 def cloud(service: Core, session_id: str, accept: Annotated[str | None, Header()] = None) -> Response:
     """Surface points and outward normals in the world frame: ``.npy`` (M, 6) float32 by
     default, binary PLY with ``Accept: application/x-ply``."""

@@ -107,7 +107,9 @@ def _to_world(indices, score, rotation, width, voxel_size, workspace_pose) -> li
         return []
     index = tuple(indices.T)
     positions = indices * voxel_size @ workspace_pose[:3, :3].T + workspace_pose[:3, 3]
-    orientations = Rotation.from_matrix(workspace_pose[:3, :3]) * Rotation.from_quat(rotation[(slice(None), *index)].T)
+    orientations = Rotation.from_matrix(workspace_pose[:3, :3]) * Rotation.from_quat(
+        rotation[(slice(None), *index)].T
+    )
     approaches = orientations.apply([0.0, 0.0, 1.0])
     quaternions = orientations.as_quat()
     widths = width[index] * voxel_size

@@ -1,0 +1,20 @@
+# vgn-service: the grasp-planning HTTP API on port 8000 (CPU build).
+FROM python:3.11-slim
+
+# libusb: imported by open3d; libgomp: OpenMP runtime of open3d and torch.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends libusb-1.0-0 libgomp1 \
+    && rm -rf /var/lib/apt/lists/*
+
+WORKDIR /app
+COPY pyproject.toml README.md ./
+COPY client client
+COPY service service
+COPY sim_worker sim_worker
+# torch==2.13.0 is pinned in pyproject.toml; the CPU index keeps the CUDA stack out of the image.
+RUN pip install --no-cache-dir --extra-index-url https://download.pytorch.org/whl/cpu ".[service]"
+
+ENV VGN_DEVICE=cpu
+EXPOSE 8000
+HEALTHCHECK --interval=30s --timeout=5s CMD python -c "import httpx; httpx.get('http://127.0.0.1:8000/healthz').raise_for_status()"
+CMD ["uvicorn", "service.app:app", "--host", "0.0.0.0", "--port", "8000"]
