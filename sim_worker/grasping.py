@@ -1,0 +1,97 @@
+"""Executing one grasp in simulation, VGN's protocol (DESIGN §4)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from sim_worker.gripper import Gripper
+from sim_worker.world import World
+
+PREGRASP_DISTANCE = 0.05  # m back along the approach
+LIFT_DISTANCE = 0.10  # m
+#: Beyond this angle from straight down, lifting goes along world z instead of back along the approach.
+STEEP_APPROACH = np.pi / 3
+#: A grasp holds something when the fingers stay apart by more than this fraction of the max opening.
+HELD_OPENING_FRACTION = 0.1
+
+
+class Outcome(str, Enum):
+    SUCCESS = "success"
+    PREGRASP_COLLISION = "pregrasp_collision"
+    APPROACH_COLLISION = "approach_collision"
+    NOTHING_HELD = "nothing_held"
+
+
+@dataclass
+class GraspTrial:
+    """What happened: ``label`` is 1 when an object was lifted and held."""
+
+    outcome: Outcome
+    width: float  # finger opening at the end (m); the max opening after a collision
+    grasped_body: int | None
+    sim_steps: int
+    seconds: float
+
+    @property
+    def label(self) -> int:
+        return int(self.outcome is Outcome.SUCCESS)
+
+
+def translated(pose: np.ndarray, offset_in_pose_frame: np.ndarray) -> np.ndarray:
+    moved = pose.copy()
+    moved[:3, 3] = pose[:3, 3] + pose[:3, :3] @ np.asarray(offset_in_pose_frame, dtype=np.float64)
+    return moved
+
+
+def retreat_pose(grasp_pose: np.ndarray) -> np.ndarray:
+    """Where to lift to: back along the approach for top-down-ish grasps, else straight up."""
+    approach = grasp_pose[:3, 2]
+    angle = np.arccos(np.clip(approach @ np.array([0.0, 0.0, -1.0]), -1.0, 1.0))
+    if angle > STEEP_APPROACH:
+        lifted = grasp_pose.copy()
+        lifted[2, 3] += LIFT_DISTANCE
+        return lifted
+    return translated(grasp_pose, [0.0, 0.0, -LIFT_DISTANCE])
+
+
+def execute_grasp(
+    world: World,
+    gripper: Gripper,
+    grasp_pose: np.ndarray,
+    allow_contact: bool = True,
+    remove_grasped: bool = True,
+) -> GraspTrial:
+    """Try a grasp whose frame is ``grasp_pose`` (4×4, world; +z approach, y closing axis).
+
+    Spawn open at the pre-grasp 5 cm back along the approach (contact there fails), move
+    straight in, stopping on contact (a failure unless ``allow_contact``), close, lift 10 cm,
+    and succeed when something is still between the fingers. The grasped object is removed
+    when ``remove_grasped``; the gripper is parked afterwards either way.
+    """
+    started, first_step = time.perf_counter(), world.sim_time
+
+    def finish(outcome: Outcome, width: float, body: int | None = None) -> GraspTrial:
+        gripper.park()
+        steps = round((world.sim_time - first_step) / world.config.timestep)
+        return GraspTrial(outcome, width, body, steps, time.perf_counter() - started)
+
+    gripper.reset(translated(grasp_pose, [0.0, 0.0, -PREGRASP_DISTANCE]))
+    if gripper.collides_now():
+        return finish(Outcome.PREGRASP_COLLISION, gripper.spec.max_opening)
+    stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True)
+    if stopped_on_contact and not allow_contact:
+        return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
+    gripper.close()
+    gripper.move_to(retreat_pose(grasp_pose), abort_on_contact=False)
+    width = gripper.opening()
+    held = gripper.bodies_between_fingers() & set(world.objects)
+    if width <= HELD_OPENING_FRACTION * gripper.spec.max_opening or not held:
+        return finish(Outcome.NOTHING_HELD, width)
+    body = min(held)
+    if remove_grasped:
+        world.remove_object(body)
+    return finish(Outcome.SUCCESS, width, body)

@@ -1,0 +1,129 @@
+"""A free-floating parallel-jaw gripper whose base frame is the grasp frame (DESIGN §2)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet
+
+from client.geometry import pose_from_matrix
+from sim_worker.world import World
+
+GRIPPER_URDF = Path(__file__).parent / "assets" / "gripper.urdf"
+#: Where the gripper waits between grasps: far outside the workspace and every camera's view.
+PARKED_POSITION = (0.15, 0.15, 10.0)
+
+
+@dataclass(frozen=True)
+class GripperSpec:
+    """Franka-hand-like parameters, as VGN's simulation (DESIGN §4)."""
+
+    max_opening: float = 0.08
+    finger_depth: float = 0.05
+    finger_force: float = 20.0  # N per finger while closing
+    finger_friction: float = 1.0
+    hold_force: float = 300.0  # N of the constraint that carries the hand
+    close_duration: float = 0.5  # s
+    step_length: float = 0.002  # m per motion step
+    speed: float = 0.10  # m/s of motion
+
+
+class Gripper:
+    """The hand is a dynamic body carried by a fixed constraint (so it pushes and is pushed
+    like VGN's); fingers are prismatic joints coupled by a gear so they close symmetrically."""
+
+    def __init__(self, world: World, spec: GripperSpec = GripperSpec()) -> None:
+        self.world, self.spec = world, spec
+        p = world.p
+        self.body = p.loadURDF(str(GRIPPER_URDF), PARKED_POSITION, (0, 0, 0, 1))
+        names = {p.getJointInfo(self.body, j)[1].decode(): j for j in range(p.getNumJoints(self.body))}
+        self.fingers = (names["left_finger_joint"], names["right_finger_joint"])
+        for finger in self.fingers:
+            p.changeDynamics(self.body, finger, lateralFriction=spec.finger_friction)
+        gear = p.createConstraint(
+            self.body, self.fingers[0], self.body, self.fingers[1], pybullet.JOINT_GEAR, [0, 1, 0], [0, 0, 0], [0, 0, 0]
+        )
+        p.changeConstraint(gear, gearRatio=-1, erp=0.1, maxForce=50)
+        self.constraint = p.createConstraint(
+            self.body, -1, -1, -1, pybullet.JOINT_FIXED, [0, 0, 0], [0, 0, 0], PARKED_POSITION
+        )
+        self.steps_per_motion = max(1, round(spec.step_length / spec.speed / world.config.timestep))
+        self.park()
+
+    # Placement ----------------------------------------------------------------------------
+    def reset(self, pose: np.ndarray, opening: float | None = None) -> None:
+        """Teleport the hand so its grasp frame is at ``pose`` (4×4 in the world), fingers
+        opened to ``opening`` (default: fully), without stepping physics."""
+        p = self.world.p
+        position, orientation = pose_from_matrix(pose)
+        p.resetBasePositionAndOrientation(self.body, position, orientation)
+        p.resetBaseVelocity(self.body, [0, 0, 0], [0, 0, 0])
+        self._hold(position, orientation)
+        half = 0.5 * (self.spec.max_opening if opening is None else opening)
+        for finger in self.fingers:
+            p.resetJointState(self.body, finger, half)
+            p.setJointMotorControl2(
+                self.body, finger, pybullet.POSITION_CONTROL, targetPosition=half, force=self.spec.finger_force
+            )
+
+    def park(self) -> None:
+        pose = np.eye(4)
+        pose[:3, 3] = PARKED_POSITION
+        self.reset(pose)
+
+    def _hold(self, position, orientation) -> None:
+        self.world.p.changeConstraint(
+            self.constraint, position, jointChildFrameOrientation=orientation, maxForce=self.spec.hold_force
+        )
+
+    # State --------------------------------------------------------------------------------
+    def pose(self) -> np.ndarray:
+        position, orientation = self.world.p.getBasePositionAndOrientation(self.body)
+        from client.geometry import matrix_from_pose
+
+        return matrix_from_pose(np.asarray(position), np.asarray(orientation))
+
+    def opening(self) -> float:
+        """Current distance between the inner finger faces, metres."""
+        return float(sum(self.world.p.getJointState(self.body, f)[0] for f in self.fingers))
+
+    def touching(self) -> set[int]:
+        """Bodies in contact with the hand or fingers (after ``performCollisionDetection``)."""
+        return {c[2] for c in self.world.p.getContactPoints(bodyA=self.body) if c[2] != self.body}
+
+    def collides_now(self) -> bool:
+        """Contact at the current placement, found without stepping physics."""
+        self.world.p.performCollisionDetection()
+        return bool(self.touching())
+
+    def bodies_between_fingers(self) -> set[int]:
+        """Bodies touched by both fingers: what the gripper holds."""
+        p = self.world.p
+        left = {c[2] for c in p.getContactPoints(bodyA=self.body, linkIndexA=self.fingers[0])}
+        right = {c[2] for c in p.getContactPoints(bodyA=self.body, linkIndexA=self.fingers[1])}
+        return (left & right) - {self.body}
+
+    # Motion -------------------------------------------------------------------------------
+    def move_to(self, target: np.ndarray, abort_on_contact: bool) -> bool:
+        """Move the hand in a straight line to ``target`` (4×4 world), orientation fixed, in
+        2 mm steps at 10 cm/s. Returns True when it stopped on contact."""
+        start = self.pose()[:3, 3]
+        _, orientation = pose_from_matrix(target)
+        goal = target[:3, 3]
+        count = max(1, int(np.ceil(np.linalg.norm(goal - start) / self.spec.step_length)))
+        for n in range(1, count + 1):
+            self._hold(start + (goal - start) * n / count, orientation)
+            self.world.step(self.steps_per_motion)
+            if abort_on_contact and self.touching():
+                return True
+        return False
+
+    def close(self) -> None:
+        """Close both fingers with the set force for ``close_duration`` seconds."""
+        for finger in self.fingers:
+            self.world.p.setJointMotorControl2(
+                self.body, finger, pybullet.POSITION_CONTROL, targetPosition=0.0, force=self.spec.finger_force
+            )
+        self.world.step(round(self.spec.close_duration / self.world.config.timestep))

@@ -1,0 +1,152 @@
+"""The PyBullet world: physics settings, the table, and the objects on it (DESIGN §4)."""
+
+from __future__ import annotations
+
+import pkgutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+#: Height of the table top in the world; the workspace cube's corner is the world origin.
+TABLE_Z = 0.05
+WORKSPACE_SIZE = 0.30
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """VGN's simulation parameters, so figures compare with the paper."""
+
+    timestep: float = 1.0 / 240.0
+    solver_iterations: int = 150
+    gravity: float = -9.81
+    object_friction: float = 1.0
+    table_friction: float = 0.5
+    rest_speed: float = 0.01  # m/s and rad/s: "at rest" below this
+    rest_timeout: float = 2.0  # seconds to wait for a scene to settle
+    rest_check_steps: int = 60
+
+
+@dataclass
+class SimObject:
+    body: int
+    urdf: Path
+    scale: float
+
+
+class World:
+    """A PyBullet world in DIRECT mode with a table whose top is at ``TABLE_Z``.
+
+    ``renderer``: ``"egl"`` loads PyBullet's EGL plugin (it must be loaded before any body
+    exists, hence here), ``"tiny"`` uses the CPU TinyRenderer, ``"auto"`` tries EGL first.
+    """
+
+    def __init__(self, config: PhysicsConfig = PhysicsConfig(), renderer: str = "auto") -> None:
+        self.config = config
+        self.p = BulletClient(connection_mode=pybullet.DIRECT)
+        self.egl = renderer in ("egl", "auto") and self._load_egl(required=renderer == "egl")
+        self.p.setPhysicsEngineParameter(
+            fixedTimeStep=config.timestep, numSolverIterations=config.solver_iterations
+        )
+        self.p.setGravity(0.0, 0.0, config.gravity)
+        self.objects: dict[int, SimObject] = {}
+        self.table = self._create_table()
+        self.sim_time = 0.0
+
+    def _load_egl(self, required: bool) -> bool:
+        loader = pkgutil.get_loader("eglRenderer")
+        try:
+            if loader is None:
+                raise RuntimeError("pybullet's eglRenderer module is missing")
+            return self.p.loadPlugin(loader.get_filename(), "_eglRendererPlugin") >= 0
+        except Exception as error:  # pybullet raises plain errors when EGL is unavailable
+            if required:
+                raise RuntimeError(f"the EGL renderer cannot be loaded: {error}") from None
+            return False
+
+    def _create_table(self) -> int:
+        half_extents = [0.5, 0.5, 0.025]
+        shape = self.p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half_extents)
+        visual = self.p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half_extents, rgbaColor=[0.8, 0.8, 0.8, 1])
+        table = self.p.createMultiBody(
+            0.0, shape, visual, basePosition=[WORKSPACE_SIZE / 2, WORKSPACE_SIZE / 2, TABLE_Z - 0.025]
+        )
+        self.p.changeDynamics(table, -1, lateralFriction=self.config.table_friction)
+        return table
+
+    # Objects ------------------------------------------------------------------------------
+    def add_object(self, urdf: Path, position, orientation=(0.0, 0.0, 0.0, 1.0), scale: float = 1.0) -> int:
+        """Load an object URDF at a pose ([x, y, z], [x, y, z, w]) with a uniform scale."""
+        body = self.p.loadURDF(str(urdf), list(position), list(orientation), globalScaling=scale)
+        self.p.changeDynamics(body, -1, lateralFriction=self.config.object_friction)
+        self.objects[body] = SimObject(body, Path(urdf), scale)
+        return body
+
+    def remove_object(self, body: int) -> None:
+        self.p.removeBody(body)
+        del self.objects[body]
+
+    def object_pose(self, body: int) -> tuple[np.ndarray, np.ndarray]:
+        position, orientation = self.p.getBasePositionAndOrientation(body)
+        return np.asarray(position), np.asarray(orientation)
+
+    def aabb(self, body: int) -> tuple[np.ndarray, np.ndarray]:
+        lower, upper = self.p.getAABB(body)
+        return np.asarray(lower), np.asarray(upper)
+
+    # Physics ------------------------------------------------------------------------------
+    def step(self, count: int = 1) -> None:
+        for _ in range(count):
+            self.p.stepSimulation()
+        self.sim_time += count * self.config.timestep
+
+    def at_rest(self) -> bool:
+        for body in self.objects:
+            linear, angular = self.p.getBaseVelocity(body)
+            if max(np.abs(linear).max(), np.abs(angular).max()) > self.config.rest_speed:
+                return False
+        return True
+
+    def wait_for_rest(self) -> bool:
+        """Step until every object is at rest (checked every 60 steps, at most 2 s)."""
+        steps = int(round(self.config.rest_timeout / self.config.timestep))
+        for _ in range(0, steps, self.config.rest_check_steps):
+            self.step(self.config.rest_check_steps)
+            if self.at_rest():
+                return True
+        return False
+
+    def contacts(self, body: int, other: int | None = None) -> list:
+        if other is None:
+            return list(self.p.getContactPoints(bodyA=body))
+        return list(self.p.getContactPoints(bodyA=body, bodyB=other))
+
+    def remove_objects_outside(self, lower=(0.0, 0.0, 0.0), upper=(WORKSPACE_SIZE,) * 3) -> list[int]:
+        """Remove objects whose centre left the workspace cube (fallen off, flung away)."""
+        removed = []
+        for body in list(self.objects):
+            position, _ = self.object_pose(body)
+            if np.any(position < lower) or np.any(position > upper):
+                self.remove_object(body)
+                removed.append(body)
+        return removed
+
+    def save_state(self) -> int:
+        return self.p.saveState()
+
+    def restore_state(self, state: int) -> None:
+        self.p.restoreState(stateId=state)
+
+    def discard_state(self, state: int) -> None:
+        self.p.removeState(state)
+
+    def close(self) -> None:
+        self.p.disconnect()
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
