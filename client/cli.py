@@ -4,6 +4,7 @@
     vgn-client status                     # health, readiness and model of a running service
     vgn-client sessions                   # list live sessions
     vgn-client grasps SESSION --top 5     # best grasps of a session as a table
+    vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
 
 ``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key.
 """
@@ -57,7 +58,60 @@ def build_parser() -> argparse.ArgumentParser:
     grasps.add_argument("--threshold", type=float, default=0.9, help="minimum quality (default %(default)s)")
     grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
+
+    _add_clear_scene(commands)
     return parser
+
+
+def _add_clear_scene(commands) -> None:
+    clear = commands.add_parser(
+        "clear-scene",
+        help="clutter removal: grasp objects off a table until it is clear",
+        description="Clutter removal as in the VGN paper. With --sim a PyBullet world plays the robot: "
+        "it renders depth views, posts them to the service through this client, executes the best grasp "
+        "and repeats until the table is clear, no grasp is found, or two grasps in a row fail. "
+        "Without --url an embedded service is started on a free port and stopped at the end.",
+    )
+    clear.add_argument("--sim", action="store_true", help="run in simulation (the only mode so far)")
+    clear.add_argument(
+        "--url",
+        default=os.environ.get("VGN_URL"),
+        help="service address (env VGN_URL); when absent, an embedded service is started",
+    )
+    clear.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
+    clear.add_argument("--model", help="weights for the embedded service (sets its VGN_MODEL)")
+    clear.add_argument("--scene", choices=["blocks", "pile", "packed"], default="blocks")
+    clear.add_argument(
+        "--objects",
+        help="object set: 'blocks', 'pybullet' or a folder of URDFs (default: the scene's built-in set)",
+    )
+    clear.add_argument("--object-count", type=int, default=5, help="objects per round (default %(default)s)")
+    clear.add_argument("--rounds", type=int, default=1, help="rounds to run (default %(default)s)")
+    clear.add_argument("--seed", type=int, default=1, help="scene seed; round r uses (seed, r)")
+    clear.add_argument(
+        "--threshold", type=float, default=0.9, help="grasp quality threshold (default %(default)s)"
+    )
+    clear.add_argument(
+        "--views",
+        choices=["six", "side"],
+        default="six",
+        help="six views on a circle (VGN) or a single side view",
+    )
+    clear.add_argument(
+        "--selection",
+        choices=["best", "random"],
+        default="best",
+        help="execute the best grasp, or a random one above threshold (as the paper)",
+    )
+    clear.add_argument("--noise", action="store_true", help="add depth noise (robustness runs)")
+    clear.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
+    clear.add_argument(
+        "--results",
+        help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",
+    )
+    clear.add_argument(
+        "--save-images", action="store_true", help="write a PNG per attempt into the results folder"
+    )
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -114,6 +168,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "serve":
         return _serve(args)
+    if args.command == "clear-scene":
+        from client.clear_scene import clear_scene
+
+        return clear_scene(args)
     try:
         with VGNClient(args.url, api_key=args.api_key) as vgn:
             if args.command == "status":

@@ -78,8 +78,9 @@ class PlanningService:
         """Decode an uploaded depth image (PNG or raw float32) and fuse it.
 
         The image is decoded and checked before the session is touched, so a rejected frame
-        leaves the volume as it was.
+        leaves the volume as it was. An unknown session is reported before any decoding.
         """
+        self.sessions.info(session_id)
         intrinsics = self._frame_intrinsics(session_id, meta.intrinsics)
         depth = decode_depth(data, media_type, intrinsics, meta.depth_scale)
         return self.add_frame(session_id, depth, meta.camera_pose.as_matrix(), intrinsics, meta.max_depth)

@@ -23,7 +23,7 @@ def decode_depth(data: bytes, media_type: str, intrinsics: Intrinsics, depth_sca
     """
     media_type = media_type.split(";")[0].strip().lower()
     if media_type == PNG_MEDIA_TYPE:
-        depth = _decode_png(data, depth_scale)
+        depth = _decode_png(data, depth_scale, (intrinsics.width, intrinsics.height))
     elif media_type == RAW_MEDIA_TYPE:
         depth = _decode_raw(data, intrinsics)
     else:
@@ -40,15 +40,22 @@ def decode_depth(data: bytes, media_type: str, intrinsics: Intrinsics, depth_sca
     return depth
 
 
-def _decode_png(data: bytes, depth_scale: float) -> np.ndarray:
+def _decode_png(data: bytes, depth_scale: float, expected_size: tuple[int, int]) -> np.ndarray:
+    """Pixels are decoded only after the header's size matches the intrinsics, so a small
+    file declaring a huge image (a decompression bomb) costs nothing."""
     try:
         with Image.open(io.BytesIO(data)) as image:
             if image.format != "PNG":
                 raise InvalidInput(f"depth part is declared PNG but holds {image.format or 'unknown'} data")
             if image.mode not in _PNG_16BIT_MODES:
                 raise InvalidInput(f"depth PNG must be single-channel 16-bit, got mode {image.mode!r}")
+            if image.size != expected_size:
+                raise InvalidInput(
+                    f"depth image is {image.size[0]}x{image.size[1]} but the intrinsics say "
+                    f"{expected_size[0]}x{expected_size[1]}"
+                )
             raw = np.asarray(image)
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as error:
+    except (UnidentifiedImageError, Image.DecompressionBombError, OSError, SyntaxError, ValueError) as error:
         raise InvalidInput(f"depth PNG cannot be read: {error}") from None
     if raw.min(initial=0) < 0:
         raise InvalidInput("depth PNG holds negative values")

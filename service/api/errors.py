@@ -10,7 +10,6 @@ from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from service.api.limits import BodyTooLarge
 from service.errors import (
     CapacityExceeded,
     InvalidInput,
@@ -71,10 +70,6 @@ def install_error_handlers(app: FastAPI) -> None:
             content={"detail": error.detail},
             headers=getattr(error, "headers", None),
         )
-
-    @app.exception_handler(BodyTooLarge)
-    async def _too_large(_: Request, error: BodyTooLarge) -> JSONResponse:
-        return JSONResponse(status_code=413, content={"detail": str(error)})
 
     @app.exception_handler(CheckpointError)
     async def _checkpoint(_: Request, error: CheckpointError) -> JSONResponse:

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import json
 
+from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 
-class BodyTooLarge(Exception):
-    """Raised from ``receive`` when a streamed body passes the limit."""
+class BodyTooLarge(HTTPException):
+    """Raised from ``receive`` when a streamed body passes the limit. An HTTPException, so
+    FastAPI's body parsing passes it through instead of turning it into a 400."""
 
     def __init__(self, size: int, limit: int) -> None:
-        super().__init__(too_large_message(size, limit))
+        super().__init__(413, too_large_message(size, limit))
 
 
 def too_large_message(size: int, limit: int) -> str:

@@ -7,7 +7,7 @@ import secrets
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, Depends, Header, Query, Request, Response
+from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import ValidationError
 from starlette.datastructures import UploadFile
@@ -56,8 +56,6 @@ def require_api_key(
     if given is None and authorization and authorization.lower().startswith("bearer "):
         given = authorization[7:].strip()
     if given is None or not secrets.compare_digest(given.encode(), expected.encode()):
-        from fastapi import HTTPException
-
         raise HTTPException(
             401,
             "missing or wrong API key (X-API-Key or Authorization: Bearer)",
@@ -175,6 +173,11 @@ async def add_frame(service: Core, session_id: str, request: Request):
         meta_text, data, content_type = await _frame_parts(form)
     finally:
         await form.close()
+    limit = request.app.state.settings.max_frame_bytes
+    if len(data) > limit:
+        raise HTTPException(
+            413, f"depth image of {len(data)} bytes exceeds the limit of {limit} bytes (VGN_MAX_FRAME_BYTES)"
+        )
     try:
         meta = FrameMeta.model_validate_json(meta_text)
     except ValidationError as error:
@@ -234,8 +237,6 @@ def cloud(service: Core, session_id: str, accept: Annotated[str | None, Header()
         return Response(_ply(service.cloud(session_id)), media_type=PLY_MEDIA_TYPE)
     if NPY_MEDIA_TYPE in wanted or "*/*" in wanted or "application/*" in wanted:
         return Response(_npy(service.cloud(session_id)), media_type=NPY_MEDIA_TYPE)
-    from fastapi import HTTPException
-
     raise HTTPException(406, f"cloud is served as {NPY_MEDIA_TYPE} or {PLY_MEDIA_TYPE}, not {accept!r}")
 
 

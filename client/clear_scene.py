@@ -1,0 +1,109 @@
+"""``vgn-client clear-scene --sim``: wire the CLI to the simulator and a (possibly embedded) service.
+
+The simulator is imported only here, so the client package itself never needs pybullet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from pathlib import Path
+
+from client.embedded import EmbeddedService
+from client.http import VGNClient, VGNError
+
+
+def clear_scene(args: argparse.Namespace) -> int:
+    if not args.sim:
+        print("error: only simulated runs exist so far: add --sim", file=sys.stderr)
+        return 2
+    try:
+        from sim_worker.clutter import ClutterConfig
+        from sim_worker.metrics import summary_table
+        from sim_worker.results import ResultsFolder
+    except ImportError as error:
+        print(
+            f"error: the simulator needs the sim extra ({error}): pip install 'vgn-service[all]'",
+            file=sys.stderr,
+        )
+        return 2
+    config = ClutterConfig(
+        scene=args.scene,
+        objects=args.objects,
+        object_count=args.object_count,
+        rounds=args.rounds,
+        seed=args.seed,
+        threshold=args.threshold,
+        views=args.views,
+        selection=args.selection,
+        noise=args.noise,
+        renderer=args.renderer,
+    )
+    results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
+    try:
+        results = ResultsFolder(results_dir, config.as_json())
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    with contextlib.ExitStack() as stack:
+        url = args.url
+        if url is None:
+            print("starting an embedded service ...", file=sys.stderr)
+            url = stack.enter_context(
+                EmbeddedService(model=args.model, log_path=results_dir / "service.log")
+            ).url
+        vgn = stack.enter_context(VGNClient(url, api_key=args.api_key))
+        readiness = vgn.ready()
+        if not readiness.ready:
+            print(
+                f"error: the service at {url} cannot plan: {readiness.detail} (pass --model PATH)",
+                file=sys.stderr,
+            )
+            return 2
+        try:
+            summary = _run(config, vgn, results, results_dir / "images" if args.save_images else None)
+        except VGNError as error:
+            print(f"error: the service answered {error}", file=sys.stderr)
+            return 1
+    print(
+        f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "
+        f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {summary['model']}"
+    )
+    print(summary_table(summary))
+    print(f"results: {results_dir}/ (rounds.csv, grasps.csv, summary.json)")
+    return 0
+
+
+def _run(config, vgn: VGNClient, results, image_dir) -> dict:
+    from sim_worker.clutter import ClutterRemoval
+
+    remaining = config.rounds - len(results.finished_rounds())
+    if remaining < config.rounds:
+        print(
+            f"resuming: {config.rounds - remaining} of {config.rounds} rounds already done", file=sys.stderr
+        )
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(total=max(remaining, 0), unit="round", file=sys.stderr)
+    except ImportError:  # pragma: no cover - tqdm ships with the sim extra
+        bar = None
+    episode = ClutterRemoval(config, vgn, results, image_dir)
+    model = vgn.model().model_id or "-"
+
+    def progress(record) -> None:
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(
+                success=f"{record.successes}/{record.attempts}",
+                cleared=f"{record.cleared}/{record.object_count}",
+            )
+
+    try:
+        summary = episode.run(progress)
+    finally:
+        episode.close()
+        if bar is not None:
+            bar.close()
+    return {**summary, "model": model}
