@@ -43,7 +43,14 @@ class Gripper:
         for finger in self.fingers:
             p.changeDynamics(self.body, finger, lateralFriction=spec.finger_friction)
         gear = p.createConstraint(
-            self.body, self.fingers[0], self.body, self.fingers[1], pybullet.JOINT_GEAR, [0, 1, 0], [0, 0, 0], [0, 0, 0]
+            self.body,
+            self.fingers[0],
+            self.body,
+            self.fingers[1],
+            pybullet.JOINT_GEAR,
+            [0, 1, 0],
+            [0, 0, 0],
+            [0, 0, 0],
         )
         p.changeConstraint(gear, gearRatio=-1, erp=0.1, maxForce=50)
         self.constraint = p.createConstraint(
@@ -65,7 +72,11 @@ class Gripper:
         for finger in self.fingers:
             p.resetJointState(self.body, finger, half)
             p.setJointMotorControl2(
-                self.body, finger, pybullet.POSITION_CONTROL, targetPosition=half, force=self.spec.finger_force
+                self.body,
+                finger,
+                pybullet.POSITION_CONTROL,
+                targetPosition=half,
+                force=self.spec.finger_force,
             )
 
     def park(self) -> None:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import pkgutil
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,6 +16,24 @@ from pybullet_utils.bullet_client import BulletClient
 #: Height of the table top in the world; the workspace cube's corner is the world origin.
 TABLE_Z = 0.05
 WORKSPACE_SIZE = 0.30
+
+
+@contextlib.contextmanager
+def _quiet_native_stdout():
+    """Silence what PyBullet's C code prints (the EGL plugin lists GL details on load and exit)."""
+    sys.stdout.flush()
+    try:
+        saved = os.dup(1)
+    except OSError:  # no real stdout to silence
+        yield
+        return
+    with open(os.devnull, "wb") as devnull:
+        os.dup2(devnull.fileno(), 1)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 1)
+            os.close(saved)
 
 
 @dataclass(frozen=True)
@@ -60,7 +81,8 @@ class World:
         try:
             if loader is None:
                 raise RuntimeError("pybullet's eglRenderer module is missing")
-            return self.p.loadPlugin(loader.get_filename(), "_eglRendererPlugin") >= 0
+            with _quiet_native_stdout():
+                return self.p.loadPlugin(loader.get_filename(), "_eglRendererPlugin") >= 0
         except Exception as error:  # pybullet raises plain errors when EGL is unavailable
             if required:
                 raise RuntimeError(f"the EGL renderer cannot be loaded: {error}") from None
@@ -69,7 +91,9 @@ class World:
     def _create_table(self) -> int:
         half_extents = [0.5, 0.5, 0.025]
         shape = self.p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half_extents)
-        visual = self.p.createVisualShape(pybullet.GEOM_BOX, halfExtents=half_extents, rgbaColor=[0.8, 0.8, 0.8, 1])
+        visual = self.p.createVisualShape(
+            pybullet.GEOM_BOX, halfExtents=half_extents, rgbaColor=[0.8, 0.8, 0.8, 1]
+        )
         table = self.p.createMultiBody(
             0.0, shape, visual, basePosition=[WORKSPACE_SIZE / 2, WORKSPACE_SIZE / 2, TABLE_Z - 0.025]
         )
@@ -83,6 +107,11 @@ class World:
         self.p.changeDynamics(body, -1, lateralFriction=self.config.object_friction)
         self.objects[body] = SimObject(body, Path(urdf), scale)
         return body
+
+    def clear_objects(self) -> None:
+        """Remove every object, keeping the table (and any gripper)."""
+        for body in list(self.objects):
+            self.remove_object(body)
 
     def remove_object(self, body: int) -> None:
         self.p.removeBody(body)
@@ -143,7 +172,8 @@ class World:
         self.p.removeState(state)
 
     def close(self) -> None:
-        self.p.disconnect()
+        with _quiet_native_stdout():
+            self.p.disconnect()
 
     def __enter__(self) -> World:
         return self

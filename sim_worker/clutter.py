@@ -1,0 +1,173 @@
+"""The clutter-removal benchmark (VGN §V-B), driving the service through the client only.
+
+Each round: generate a scene, then repeat { reset the session, render and post the views,
+ask for grasps, execute one, remove the grasped object, let the scene settle } until the
+table is clear, no grasp is found, or two grasps in a row failed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from client.http import VGNClient
+from client.schemas import Grasp
+from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, side_view, six_views
+from sim_worker.grasping import execute_grasp
+from sim_worker.gripper import Gripper
+from sim_worker.metrics import summarize
+from sim_worker.objects import object_set
+from sim_worker.results import ResultsFolder, RoundRecord
+from sim_worker.scenes import generate_scene
+from sim_worker.world import World
+
+MAX_CONSECUTIVE_FAILURES = 2
+
+
+@dataclass(frozen=True)
+class ClutterConfig:
+    """Settings of a clear-scene run; a resumed run must use the same ones."""
+
+    scene: str = "blocks"  # blocks | pile | packed
+    objects: str | None = None  # object set name or URDF folder; None = the scene's default
+    object_count: int = 5
+    rounds: int = 1
+    seed: int = 1
+    threshold: float = 0.9
+    views: str = "six"  # six | side
+    selection: str = "best"  # best | random
+    noise: bool = False
+    renderer: str = "auto"
+
+    def as_json(self) -> dict:
+        return asdict(self)
+
+
+def camera_views(kind: str) -> list[np.ndarray]:
+    if kind == "six":
+        return six_views()
+    if kind == "side":
+        return [side_view()]
+    raise ValueError(f"unknown views {kind!r}: use 'six' or 'side'")
+
+
+class ClutterRemoval:
+    """Runs rounds in one PyBullet world against one service session."""
+
+    def __init__(
+        self, config: ClutterConfig, vgn: VGNClient, results: ResultsFolder, image_dir: Path | None = None
+    ) -> None:
+        self.config, self.vgn, self.results = config, vgn, results
+        self.world = World(renderer=config.renderer)
+        self.gripper = Gripper(self.world)
+        self.camera = Camera(self.world, noise=DepthNoise() if config.noise else None)
+        self.views = camera_views(config.views)
+        self.objects = object_set(config.objects or "", config.scene)
+        self.image_dir = image_dir
+        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
+
+    def close(self) -> None:
+        try:
+            self.vgn.delete_session(self.session_id)
+        finally:
+            self.world.close()
+
+    def run(self, progress: Callable[[RoundRecord], None] | None = None) -> dict:
+        """Run the rounds not finished yet; returns the summary over all finished rounds."""
+        done = self.results.finished_rounds()
+        for round_id in range(self.config.rounds):
+            if round_id in done:
+                continue
+            record = self.run_round(round_id)
+            self.results.commit(record)
+            if progress:
+                progress(record)
+        summary = summarize(self.results.rounds, self.results.grasps)
+        self.results.write_summary({"config": self.config.as_json(), **summary})
+        return summary
+
+    def run_round(self, round_id: int) -> RoundRecord:
+        started = time.perf_counter()
+        rng = np.random.default_rng([self.config.seed, round_id])  # the same scene whenever it runs
+        self.camera.rng = rng
+        self.world.clear_objects()
+        generate_scene(self.world, self.config.scene, self.objects, self.config.object_count, rng)
+        record = RoundRecord(round_id, f"{self.config.seed}-{round_id}", len(self.world.objects))
+        failures = 0
+        while self.world.objects and failures < MAX_CONSECUTIVE_FAILURES:
+            integration_ms = self._observe()
+            client_started = time.perf_counter()
+            answer = self.vgn.grasps(self.session_id, threshold=self.config.threshold)
+            client_ms = (time.perf_counter() - client_started) * 1e3
+            if not answer.grasps:
+                break
+            grasp = self._select(answer.grasps, rng)
+            if self.image_dir is not None:
+                self._save_image(record, grasp)
+            trial = execute_grasp(self.world, self.gripper, grasp.as_matrix(), allow_contact=True)
+            record.attempts += 1
+            record.successes += trial.label
+            failures = 0 if trial.label else failures + 1
+            record.grasps.append(
+                _grasp_row(
+                    record, grasp, trial, integration_ms, answer.planning_ms, client_ms, len(answer.grasps)
+                )
+            )
+            self.world.wait_for_rest()
+            self.world.remove_objects_outside()
+        record.cleared = record.successes
+        record.seconds = round(time.perf_counter() - started, 3)
+        return record
+
+    def _observe(self) -> float:
+        """Fuse the views of the current scene into a fresh volume; total integration ms."""
+        self.vgn.reset_session(self.session_id)
+        total = 0.0
+        for pose in self.views:
+            total += self.vgn.add_frame(self.session_id, self.camera.render_depth(pose), pose).integration_ms
+        return total
+
+    def _select(self, grasps: list[Grasp], rng: np.random.Generator) -> Grasp:
+        if self.config.selection == "random":
+            return grasps[int(rng.integers(len(grasps)))]
+        return grasps[0]  # the service ranks best first
+
+    def _save_image(self, record: RoundRecord, grasp: Grasp) -> None:
+        """A picture of the scene with the gripper drawn at the chosen grasp."""
+        from PIL import Image
+
+        self.gripper.reset(grasp.as_matrix())
+        rgb = self.camera.render_rgb(self.views[0])
+        self.gripper.park()
+        self.image_dir.mkdir(parents=True, exist_ok=True)
+        name = f"round{record.round_id:04d}_attempt{record.attempts:02d}.png"
+        Image.fromarray(rgb).save(self.image_dir / name)
+
+
+def _grasp_row(record, grasp: Grasp, trial, integration_ms, planning_ms, client_ms, count) -> dict:
+    qx, qy, qz, qw = grasp.orientation
+    x, y, z = grasp.position
+    return {
+        "round_id": record.round_id,
+        "scene_id": record.scene_id,
+        "qx": qx,
+        "qy": qy,
+        "qz": qz,
+        "qw": qw,
+        "x": x,
+        "y": y,
+        "z": z,
+        "width": grasp.width,
+        "score": grasp.quality,
+        "label": trial.label,
+        "integration_time": round(integration_ms, 3),
+        "planning_time": round(planning_ms, 3),
+        "client_planning_time": round(client_ms, 3),
+        "outcome": trial.outcome.value,
+        "grasp_count": count,
+        "trial_time": round(trial.seconds, 4),
+    }

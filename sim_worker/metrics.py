@@ -1,0 +1,87 @@
+"""The paper's clutter-removal metrics over finished rounds, with 95 % confidence intervals."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from statistics import mean, median
+from typing import Any
+
+Z_95 = 1.959964
+
+
+def wilson_interval(successes: int, trials: int) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion, in percent (robust at 0 % and 100 %)."""
+    if trials == 0:
+        return (0.0, 0.0)
+    p = successes / trials
+    centre = (p + Z_95**2 / (2 * trials)) / (1 + Z_95**2 / trials)
+    half = Z_95 * math.sqrt(p * (1 - p) / trials + Z_95**2 / (4 * trials**2)) / (1 + Z_95**2 / trials)
+    return (round(100 * max(0.0, centre - half), 1), round(100 * min(1.0, centre + half), 1))
+
+
+def _floats(rows: Iterable[Mapping[str, Any]], key: str) -> list[float]:
+    return [float(row[key]) for row in rows if row.get(key) not in (None, "")]
+
+
+def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) -> dict[str, Any]:
+    """Success rate = successes / attempts; percent cleared = objects removed by grasps /
+    objects placed; planning time as the service reports it and as the client saw it."""
+    attempts = sum(int(r["attempts"]) for r in rounds)
+    successes = sum(int(r["successes"]) for r in rounds)
+    placed = sum(int(r["object_count"]) for r in rounds)
+    cleared = sum(int(r["cleared"]) for r in rounds)
+    planning, client_planning = _floats(grasps, "planning_time"), _floats(grasps, "client_planning_time")
+    integration = _floats(grasps, "integration_time")
+    round_seconds = _floats(rounds, "seconds")
+
+    def stats(values: list[float]) -> dict[str, float] | None:
+        return {"mean": round(mean(values), 2), "p50": round(median(values), 2)} if values else None
+
+    return {
+        "rounds": len(rounds),
+        "attempts": attempts,
+        "successes": successes,
+        "success_rate": round(100 * successes / attempts, 1) if attempts else None,
+        "success_rate_ci95": wilson_interval(successes, attempts),
+        "objects_placed": placed,
+        "objects_cleared": cleared,
+        "percent_cleared": round(100 * cleared / placed, 1) if placed else None,
+        "percent_cleared_ci95": wilson_interval(cleared, placed),
+        "planning_ms": stats(planning),
+        "client_planning_ms": stats(client_planning),
+        "integration_ms": stats(integration),
+        "round_seconds": stats(round_seconds),
+    }
+
+
+def summary_table(summary: Mapping[str, Any]) -> str:
+    """A short human-readable table of a summary."""
+
+    def ms(key: str) -> str:
+        value = summary.get(key)
+        return f"{value['mean']:.1f} ms (p50 {value['p50']:.1f})" if value else "-"
+
+    def pct(key: str) -> str:
+        value = summary.get(key)
+        low, high = summary.get(f"{key}_ci95", (0, 0))
+        return f"{value:.1f} %  (95 % CI {low:.1f}-{high:.1f})" if value is not None else "-"
+
+    rows = [
+        ("rounds", str(summary["rounds"])),
+        ("grasp attempts", f"{summary['attempts']} ({summary['successes']} successful)"),
+        ("success rate", pct("success_rate")),
+        (
+            "percent cleared",
+            pct("percent_cleared") + f"  [{summary['objects_cleared']}/{summary['objects_placed']}]",
+        ),
+        ("planning (service)", ms("planning_ms")),
+        ("planning (client)", ms("client_planning_ms")),
+        ("integration / attempt", ms("integration_ms")),
+        (
+            "time per round",
+            f"{summary['round_seconds']['mean']:.1f} s" if summary.get("round_seconds") else "-",
+        ),
+    ]
+    width = max(len(name) for name, _ in rows)
+    return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)

@@ -1,0 +1,122 @@
+"""Clutter-removal results on disk: written atomically per round, resumable after a stop.
+
+Layout of a results folder:
+- ``config.json``: the run's settings; a resumed run must match them.
+- ``rounds.csv``: one row per *finished* round (round_id, scene_id, object_count, ...).
+- ``grasps.csv``: one row per attempt, VGN's columns first (round_id, scene_id, qx, qy, qz,
+  qw, x, y, z, width, score, label, integration_time, planning_time) then ours.
+- ``summary.json``: the metrics over all finished rounds.
+A round's rows are committed together (temp file + rename), so an interrupted round leaves
+no trace and is simply run again.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROUND_COLUMNS = ["round_id", "scene_id", "object_count", "cleared", "attempts", "successes", "seconds"]
+GRASP_COLUMNS = [
+    "round_id",
+    "scene_id",
+    "qx",
+    "qy",
+    "qz",
+    "qw",
+    "x",
+    "y",
+    "z",
+    "width",
+    "score",
+    "label",
+    "integration_time",
+    "planning_time",
+    # ours, after VGN's
+    "client_planning_time",
+    "outcome",
+    "grasp_count",
+    "trial_time",
+]
+
+
+@dataclass
+class RoundRecord:
+    round_id: int
+    scene_id: str
+    object_count: int
+    cleared: int = 0
+    attempts: int = 0
+    successes: int = 0
+    seconds: float = 0.0
+    grasps: list[dict[str, Any]] = field(default_factory=list)
+
+
+def write_atomically(path: Path, text: str) -> None:
+    temporary = path.with_name(f".{path.name}.tmp")
+    with temporary.open("w", newline="") as stream:
+        stream.write(text)
+        stream.flush()
+        os.fsync(stream.fileno())
+    temporary.replace(path)
+
+
+def _csv_text(columns: list[str], rows: list[dict[str, Any]]) -> str:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows({c: row.get(c, "") for c in columns} for row in rows)
+    return buffer.getvalue()
+
+
+def _read_csv(path: Path) -> list[dict[str, str]]:
+    if not path.exists():
+        return []
+    with path.open(newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+class ResultsFolder:
+    """Reads what a previous run finished and commits each new round atomically."""
+
+    def __init__(self, path: Path, config: dict[str, Any]) -> None:
+        self.path = Path(path)
+        self.path.mkdir(parents=True, exist_ok=True)
+        self._check_config(config)
+        self.rounds = _read_csv(self.path / "rounds.csv")
+        finished = {row["round_id"] for row in self.rounds}
+        # Rows of a round that never finished are dropped: that round runs again.
+        self.grasps = [row for row in _read_csv(self.path / "grasps.csv") if row["round_id"] in finished]
+
+    def _check_config(self, config: dict[str, Any]) -> None:
+        """A folder holds one run's settings; only the round count may grow on a resume."""
+        config_path = self.path / "config.json"
+        if config_path.exists():
+            previous = json.loads(config_path.read_text())
+            changed = sorted(
+                k for k in set(previous) | set(config) if k != "rounds" and previous.get(k) != config.get(k)
+            )
+            if changed:
+                raise ValueError(
+                    f"{self.path} holds results of a run with other settings ({', '.join(changed)}); "
+                    "use another --results folder or the same settings to resume"
+                )
+        write_atomically(config_path, json.dumps(config, indent=2, sort_keys=True) + "\n")
+
+    def finished_rounds(self) -> set[int]:
+        return {int(row["round_id"]) for row in self.rounds}
+
+    def commit(self, record: RoundRecord) -> None:
+        """Add a finished round: grasps first, then the round row that makes them count."""
+        round_row = {k: v for k, v in asdict(record).items() if k != "grasps"}
+        self.grasps.extend(record.grasps)
+        write_atomically(self.path / "grasps.csv", _csv_text(GRASP_COLUMNS, self.grasps))
+        self.rounds.append(round_row)
+        write_atomically(self.path / "rounds.csv", _csv_text(ROUND_COLUMNS, self.rounds))
+
+    def write_summary(self, summary: dict[str, Any]) -> None:
+        write_atomically(self.path / "summary.json", json.dumps(summary, indent=2) + "\n")
