@@ -1,0 +1,163 @@
+"""VGN's raw dataset layout (DESIGN §5), shared by data generation and training.
+
+    DIR/setup.json           size, intrinsics, max_opening_width, finger_depth
+    DIR/grasps.csv           scene_id,qx,qy,qz,qw,x,y,z,width,label  (metres, workspace frame)
+    DIR/scenes/<id>.npz      depth_imgs (n, H, W) float32, extrinsics (n, 7) [qx,qy,qz,qw,tx,ty,tz] world→camera
+
+Public VGN/GIGA raw datasets use the same layout, so they read and train here unchanged.
+Every write is atomic (temp file + rename) so an interrupted writer never leaves a torn
+file; grasps are appended per scene *after* the scene file exists, and a scene counts as
+done once it has rows in grasps.csv, so a resumed run skips it and repeats nothing.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from client.geometry import invert, matrix_from_pose, pose_from_matrix
+from client.schemas import Intrinsics
+
+GRASP_COLUMNS = ["scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "label"]
+
+
+@dataclass(frozen=True)
+class DatasetSetup:
+    size: float = 0.30
+    intrinsics: Intrinsics = field(
+        default_factory=lambda: Intrinsics(width=640, height=480, fx=540.0, fy=540.0, cx=320.0, cy=240.0)
+    )
+    max_opening_width: float = 0.08
+    finger_depth: float = 0.05
+
+    def to_json(self) -> dict:
+        i = self.intrinsics
+        return {
+            "size": self.size,
+            "intrinsic": {
+                "width": i.width,
+                "height": i.height,
+                "K": [i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0],
+            },
+            "max_opening_width": self.max_opening_width,
+            "finger_depth": self.finger_depth,
+        }
+
+    @classmethod
+    def from_json(cls, data: dict) -> DatasetSetup:
+        k = data["intrinsic"]["K"]
+        intrinsics = Intrinsics(width=data["intrinsic"]["width"], height=data["intrinsic"]["height"],
+                                fx=k[0], fy=k[4], cx=k[2], cy=k[5])  # fmt: skip
+        return cls(size=data["size"], intrinsics=intrinsics, max_opening_width=data["max_opening_width"],
+                   finger_depth=data["finger_depth"])  # fmt: skip
+
+
+@dataclass
+class SceneViews:
+    """Depth images (n, H, W) metres and their camera poses (n, 4, 4) camera → world."""
+
+    depth: np.ndarray
+    camera_poses: np.ndarray
+
+    def extrinsics(self) -> np.ndarray:
+        """(n, 7) world → camera as [qx, qy, qz, qw, tx, ty, tz] (VGN's storage)."""
+        rows = []
+        for pose in self.camera_poses:
+            translation, quaternion = pose_from_matrix(invert(pose))
+            rows.append(np.r_[quaternion, translation])
+        return np.asarray(rows, dtype=np.float64).reshape(-1, 7)
+
+    @classmethod
+    def from_extrinsics(cls, depth: np.ndarray, extrinsics: np.ndarray) -> SceneViews:
+        poses = [invert(matrix_from_pose(row[4:7], row[0:4])) for row in np.asarray(extrinsics)]
+        return cls(np.asarray(depth, dtype=np.float32), np.asarray(poses).reshape(-1, 4, 4))
+
+
+def _write_atomically(path: Path, write) -> None:
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    with temporary.open("wb") as stream:
+        write(stream)
+        stream.flush()
+        os.fsync(stream.fileno())
+    temporary.replace(path)
+
+
+class RawDataset:
+    """A raw dataset folder: create or open, add scenes with their labelled grasps, read back.
+
+    Several processes may add scenes to one folder at once: appends to ``grasps.csv`` are
+    single ``write`` calls of whole lines under an exclusive file lock.
+    """
+
+    def __init__(self, root: Path, setup: DatasetSetup | None = None) -> None:
+        self.root = Path(root)
+        self.scenes_dir = self.root / "scenes"
+        setup_path = self.root / "setup.json"
+        if setup_path.exists():
+            self.setup = DatasetSetup.from_json(json.loads(setup_path.read_text()))
+            if setup is not None and setup != self.setup:
+                raise ValueError(
+                    f"{self.root} holds a dataset with another setup ({self.setup}); use another folder"
+                )
+        else:
+            if setup is None:
+                raise FileNotFoundError(f"{setup_path} does not exist: not a raw VGN dataset")
+            self.scenes_dir.mkdir(parents=True, exist_ok=True)
+            self.setup = setup
+            _write_atomically(setup_path, lambda s: s.write(json.dumps(setup.to_json(), indent=2).encode()))
+        self.grasps_path = self.root / "grasps.csv"
+        if not self.grasps_path.exists():
+            _write_atomically(self.grasps_path, lambda s: s.write((",".join(GRASP_COLUMNS) + "\n").encode()))
+
+    def add_scene(self, scene_id: str, views: SceneViews, grasps: np.ndarray) -> None:
+        """Store a scene and its grasps: rows (qx, qy, qz, qw, x, y, z, width, label) in the
+        workspace frame. The scene file lands first; the grasp rows make it count."""
+        if not scene_id.replace("-", "").replace("_", "").isalnum():
+            raise ValueError(f"scene id {scene_id!r} must be alphanumeric (with - or _)")
+        arrays = {"depth_imgs": views.depth.astype(np.float32), "extrinsics": views.extrinsics()}
+        _write_atomically(self.scenes_dir / f"{scene_id}.npz", lambda s: np.savez_compressed(s, **arrays))
+        lines = "".join(
+            f"{scene_id}," + ",".join(f"{v:.6f}" for v in row[:8]) + f",{int(row[8])}\n"
+            for row in np.asarray(grasps, dtype=np.float64).reshape(-1, 9)
+        )
+        self._append(lines)
+
+    def _append(self, text: str) -> None:
+        import fcntl
+
+        with self.grasps_path.open("a") as stream:
+            fcntl.flock(stream, fcntl.LOCK_EX)
+            try:
+                stream.write(text)
+                stream.flush()
+                os.fsync(stream.fileno())
+            finally:
+                fcntl.flock(stream, fcntl.LOCK_UN)
+
+    def grasp_rows(self) -> list[dict[str, str]]:
+        """Rows of grasps.csv; a torn last line (a writer killed mid-write) is skipped."""
+        with self.grasps_path.open(newline="") as stream:
+            return [row for row in csv.DictReader(stream) if row.get("label") not in (None, "")]
+
+    def grasps(self) -> tuple[list[str], np.ndarray]:
+        """Scene ids and an (M, 9) array (qx, qy, qz, qw, x, y, z, width, label)."""
+        rows = self.grasp_rows()
+        values = np.array([[float(r[c]) for c in GRASP_COLUMNS[1:]] for r in rows], dtype=np.float64)
+        return [r["scene_id"] for r in rows], values.reshape(-1, 9)
+
+    def done_scene_ids(self) -> set[str]:
+        """Scenes whose grasps were written: complete, never to be generated again."""
+        return {row["scene_id"] for row in self.grasp_rows()}
+
+    def scene_ids(self) -> list[str]:
+        return sorted(self.done_scene_ids())
+
+    def read_scene(self, scene_id: str) -> SceneViews:
+        with np.load(self.scenes_dir / f"{scene_id}.npz") as data:
+            return SceneViews.from_extrinsics(data["depth_imgs"], data["extrinsics"])
