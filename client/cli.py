@@ -16,6 +16,7 @@ import json
 import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 import httpx
 
@@ -60,7 +61,46 @@ def build_parser() -> argparse.ArgumentParser:
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
 
     _add_clear_scene(commands)
+    _add_generate_data(commands)
     return parser
+
+
+def _add_generate_data(commands) -> None:
+    gen = commands.add_parser(
+        "generate-data",
+        help="label grasps in simulation through the service (VGN's raw dataset layout)",
+        description="Generate training data as VGN: each scene gets a session, 1-6 random views are posted, "
+        "the fused cloud with normals is read back, and 120 grasp points are labelled by trying 6 yaws each in "
+        "PyBullet. Output: DIR/setup.json, DIR/grasps.csv, DIR/scenes/<id>.npz. A rerun resumes.",
+    )
+    gen.add_argument("--sim", action="store_true", help="run in simulation (the only mode)")
+    gen.add_argument(
+        "--url",
+        default=os.environ.get("VGN_URL"),
+        help="service address; when absent an embedded service is started",
+    )
+    gen.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
+    gen.add_argument("--scene", choices=["pile", "packed"], default="pile")
+    gen.add_argument(
+        "--objects",
+        action="append",
+        help="object set ('blocks', 'pybullet') or URDF folder; repeat to mix (default: the scene's set)",
+    )
+    gen.add_argument("--scenes", type=int, default=10, help="scenes to generate (default %(default)s)")
+    gen.add_argument("--workers", type=int, default=1, help="simulator processes (default %(default)s)")
+    gen.add_argument("--out", required=True, help="dataset folder (created or resumed)")
+    gen.add_argument("--seed", type=int, default=0, help="scene i uses (seed, i); ids are s<seed>-<i>")
+    gen.add_argument("--points", type=int, default=120, help="grasp points per scene (default %(default)s)")
+    gen.add_argument("--noise", action="store_true", help="depth noise on the rendered views")
+    gen.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
+
+    clean = commands.add_parser(
+        "clean-data",
+        help="drop grasps outside the valid region and balance positives/negatives into a new folder",
+    )
+    clean.add_argument("source", help="raw dataset folder (kept unchanged)")
+    clean.add_argument("destination", help="new dataset folder")
+    clean.add_argument("--seed", type=int, default=0)
 
 
 def _add_clear_scene(commands) -> None:
@@ -172,6 +212,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         from client.clear_scene import clear_scene
 
         return clear_scene(args)
+    if args.command == "generate-data":
+        from client.generate_data import generate_data
+
+        return generate_data(args)
+    if args.command == "clean-data":
+        from client.dataset import clean_and_balance
+
+        kept = clean_and_balance(Path(args.source), Path(args.destination), seed=args.seed)
+        print(f"wrote {args.destination}: {kept} grasps")
+        return 0
     try:
         with VGNClient(args.url, api_key=args.api_key) as vgn:
             if args.command == "status":

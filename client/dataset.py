@@ -79,6 +79,14 @@ class SceneViews:
         return cls(np.asarray(depth, dtype=np.float32), np.asarray(poses).reshape(-1, 4, 4))
 
 
+def _csv_lines(scene_ids, rows: np.ndarray) -> str:
+    """grasps.csv lines for rows (qx, qy, qz, qw, x, y, z, width, label)."""
+    return "".join(
+        f"{sid}," + ",".join(f"{v:.6f}" for v in row[:8]) + f",{int(row[8])}\n"
+        for sid, row in zip(scene_ids, rows, strict=True)
+    )
+
+
 def _write_atomically(path: Path, write) -> None:
     temporary = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     with temporary.open("wb") as stream:
@@ -122,11 +130,8 @@ class RawDataset:
             raise ValueError(f"scene id {scene_id!r} must be alphanumeric (with - or _)")
         arrays = {"depth_imgs": views.depth.astype(np.float32), "extrinsics": views.extrinsics()}
         _write_atomically(self.scenes_dir / f"{scene_id}.npz", lambda s: np.savez_compressed(s, **arrays))
-        lines = "".join(
-            f"{scene_id}," + ",".join(f"{v:.6f}" for v in row[:8]) + f",{int(row[8])}\n"
-            for row in np.asarray(grasps, dtype=np.float64).reshape(-1, 9)
-        )
-        self._append(lines)
+        rows = np.asarray(grasps, dtype=np.float64).reshape(-1, 9)
+        self._append(_csv_lines([scene_id] * len(rows), rows))
 
     def _append(self, text: str) -> None:
         import fcntl
@@ -161,3 +166,40 @@ class RawDataset:
     def read_scene(self, scene_id: str) -> SceneViews:
         with np.load(self.scenes_dir / f"{scene_id}.npz") as data:
             return SceneViews.from_extrinsics(data["depth_imgs"], data["extrinsics"])
+
+
+#: VGN's valid grasp region (workspace frame, metres): labels outside it are dropped by cleaning.
+VALID_LOWER = (0.02, 0.02, 0.055)
+VALID_UPPER = (0.28, 0.28, 0.30)
+
+
+def clean_and_balance(source: Path, destination: Path, seed: int = 0) -> int:
+    """Write a new dataset with the grasps of ``source`` inside the valid region and as many
+    negatives as positives (negatives dropped at random). Scene files are hard-linked (copied
+    where links are impossible); ``source`` is left unchanged. Returns the grasps kept."""
+    src = RawDataset(source)
+    if Path(destination).resolve() == Path(source).resolve():
+        raise ValueError("clean-data writes a new folder: give a destination other than the source")
+    dst = RawDataset(destination, src.setup)
+    if dst.grasp_rows():
+        raise ValueError(f"{destination} already holds grasps: choose an empty folder")
+    ids, grasps = src.grasps()
+    ids = np.asarray(ids)
+    inside = np.all((grasps[:, 4:7] >= VALID_LOWER) & (grasps[:, 4:7] <= VALID_UPPER), axis=1)
+    ids, grasps = ids[inside], grasps[inside]
+    positives, negatives = np.flatnonzero(grasps[:, 8] == 1), np.flatnonzero(grasps[:, 8] == 0)
+    rng = np.random.default_rng(seed)
+    if len(negatives) > len(positives):
+        negatives = rng.choice(negatives, len(positives), replace=False)
+    keep = np.sort(np.concatenate([positives, negatives]))
+    for sid in sorted(set(ids[keep])):
+        target = dst.scenes_dir / f"{sid}.npz"
+        if not target.exists():
+            try:
+                os.link(src.scenes_dir / f"{sid}.npz", target)
+            except OSError:
+                import shutil
+
+                shutil.copyfile(src.scenes_dir / f"{sid}.npz", target)
+    dst._append(_csv_lines(ids[keep], grasps[keep]))
+    return len(keep)

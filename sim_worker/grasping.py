@@ -64,6 +64,7 @@ def execute_grasp(
     grasp_pose: np.ndarray,
     allow_contact: bool = True,
     remove_grasped: bool = True,
+    fast: bool = False,
 ) -> GraspTrial:
     """Try a grasp whose frame is ``grasp_pose`` (4×4, world; +z approach, y closing axis).
 
@@ -71,7 +72,13 @@ def execute_grasp(
     straight in, stopping on contact (a failure unless ``allow_contact``), close, lift 10 cm,
     and succeed when something is still between the fingers. The grasped object is removed
     when ``remove_grasped``; the gripper is parked afterwards either way.
+
+    ``fast`` (for labelling data, with ``allow_contact=False``) gives the same outcomes for
+    less physics: the approach is swept kinematically (any contact fails anyway), and a
+    trial ends as soon as the fingers have closed on nothing.
     """
+    if fast and allow_contact:
+        raise ValueError("fast execution sweeps the approach kinematically: it needs allow_contact=False")
     started, first_step = time.perf_counter(), world.sim_time
 
     def finish(outcome: Outcome, width: float, body: int | None = None) -> GraspTrial:
@@ -82,14 +89,22 @@ def execute_grasp(
     gripper.reset(translated(grasp_pose, [0.0, 0.0, -PREGRASP_DISTANCE]))
     if gripper.collides_now():
         return finish(Outcome.PREGRASP_COLLISION, gripper.spec.max_opening)
-    stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True)
+    if fast:
+        stopped_on_contact = not gripper.sweep_is_clear(grasp_pose)
+    else:
+        stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True)
     if stopped_on_contact and not allow_contact:
         return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
-    gripper.close()
-    gripper.move_to(retreat_pose(grasp_pose), abort_on_contact=False)
+    empty = HELD_OPENING_FRACTION * gripper.spec.max_opening
+    gripper.close(stop_when_empty=empty if fast else None)
+    if fast and gripper.opening() < empty:
+        return finish(Outcome.NOTHING_HELD, gripper.opening())
+    gripper.move_to(
+        retreat_pose(grasp_pose), abort_on_contact=False, abort_below_opening=empty if fast else None
+    )
     width = gripper.opening()
     held = gripper.bodies_between_fingers() & set(world.objects)
-    if width <= HELD_OPENING_FRACTION * gripper.spec.max_opening or not held:
+    if width <= empty or not held:
         return finish(Outcome.NOTHING_HELD, width)
     body = min(held)
     if remove_grasped:

@@ -117,9 +117,12 @@ class Gripper:
         return (left & right) - {self.body}
 
     # Motion -------------------------------------------------------------------------------
-    def move_to(self, target: np.ndarray, abort_on_contact: bool) -> bool:
+    def move_to(
+        self, target: np.ndarray, abort_on_contact: bool, abort_below_opening: float | None = None
+    ) -> bool:
         """Move the hand in a straight line to ``target`` (4×4 world), orientation fixed, in
-        2 mm steps at 10 cm/s. Returns True when it stopped on contact."""
+        2 mm steps at 10 cm/s. Returns True when it stopped early: on contact (with
+        ``abort_on_contact``) or when the fingers closed below ``abort_below_opening``."""
         start = self.pose()[:3, 3]
         _, orientation = pose_from_matrix(target)
         goal = target[:3, 3]
@@ -129,12 +132,39 @@ class Gripper:
             self.world.step(self.steps_per_motion)
             if abort_on_contact and self.touching():
                 return True
+            if abort_below_opening is not None and self.opening() < abort_below_opening:
+                return True
         return False
 
-    def close(self) -> None:
-        """Close both fingers with the set force for ``close_duration`` seconds."""
+    def sweep_is_clear(self, target: np.ndarray) -> bool:
+        """Teleport the hand along the straight line to ``target`` in 2 mm steps without
+        stepping physics, and stop at the first contact. Returns True when the whole path is
+        free (the hand then rests at ``target``): the outcome of a dynamic approach that
+        treats any contact as failure, at a fraction of its cost."""
+        start = self.pose()
+        goal = target[:3, 3]
+        count = max(1, int(np.ceil(np.linalg.norm(goal - start[:3, 3]) / self.spec.step_length)))
+        opening = self.opening()
+        for n in range(1, count + 1):
+            pose = target.copy()
+            pose[:3, 3] = start[:3, 3] + (goal - start[:3, 3]) * n / count
+            self.reset(pose, opening)
+            if self.collides_now():
+                return False
+        return True
+
+    def close(self, stop_when_empty: float | None = None) -> None:
+        """Close both fingers with the set force for ``close_duration`` seconds.
+
+        With ``stop_when_empty`` (an opening in metres), stop early once the fingers are
+        closer than that: they met nothing, and more closing cannot change the outcome."""
         for finger in self.fingers:
             self.world.p.setJointMotorControl2(
                 self.body, finger, pybullet.POSITION_CONTROL, targetPosition=0.0, force=self.spec.finger_force
             )
-        self.world.step(round(self.spec.close_duration / self.world.config.timestep))
+        total = round(self.spec.close_duration / self.world.config.timestep)
+        chunk = 8
+        for _ in range(0, total, chunk):
+            self.world.step(chunk)
+            if stop_when_empty is not None and self.opening() < stop_when_empty:
+                return

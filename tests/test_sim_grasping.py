@@ -97,3 +97,29 @@ def test_retreat_direction():
     tilted = grasp([0.1, 0.1, 0.1], Rotation.from_euler("y", 30, degrees=True) * DOWN)
     back = retreat_pose(tilted)[:3, 3] - [0.1, 0.1, 0.1]
     np.testing.assert_allclose(back, -0.1 * tilted[:3, 2], atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "position, rotation",
+    [
+        ([0.15, 0.15, 0.12], DOWN),  # good
+        ([0.15, 0.15, 0.12], Rotation.from_euler("z", 45, degrees=True) * DOWN),  # diagonal: still fits
+        ([0.05, 0.05, 0.12], DOWN),  # empty
+        ([0.15, 0.15, 0.06], DOWN),  # approach hits the table
+        ([0.15, 0.15, TABLE_Z - 0.01], SIDE),  # pre-grasp in the table
+        ([0.15, 0.20, 0.08], DOWN),  # one finger on the box edge
+    ],
+)
+def test_fast_labelling_gives_the_same_label(world, position, rotation):
+    """Fast execution (kinematic approach, early stop) must not change what a label means."""
+    add_box(world)
+    gripper = Gripper(world)
+    state = world.save_state()
+    pose = grasp(position, rotation)
+    slow = execute_grasp(world, gripper, pose, allow_contact=False, remove_grasped=False)
+    world.restore_state(state)
+    fast = execute_grasp(world, gripper, pose, allow_contact=False, remove_grasped=False, fast=True)
+    assert fast.label == slow.label
+    assert fast.sim_steps <= slow.sim_steps
+    if slow.label:
+        assert fast.width == pytest.approx(slow.width, abs=1e-3)

@@ -1,0 +1,108 @@
+"""``vgn-client generate-data --sim``: K simulator processes labelling scenes through one service."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import multiprocessing
+import queue
+import sys
+import time
+from pathlib import Path
+
+from client.embedded import EmbeddedService
+
+
+def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:
+    """One simulator process: its own PyBullet world and client, its share of the scenes."""
+    from client.dataset import RawDataset
+    from client.http import VGNClient
+    from sim_worker.datagen import generate
+
+    with VGNClient(url, api_key=api_key, timeout=120.0) as vgn:
+        generate(vgn, RawDataset(Path(out)), config, indices,
+                 report=lambda sid, grasps, seconds: reports.put((sid, grasps, seconds)))  # fmt: skip
+
+
+def generate_data(args: argparse.Namespace) -> int:
+    if not args.sim:
+        print("error: only simulated data generation exists: add --sim", file=sys.stderr)
+        return 2
+    try:
+        from client.dataset import RawDataset
+        from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
+    except ImportError as error:
+        print(
+            f"error: the simulator needs the sim extra ({error}): pip install 'vgn-service[all]'",
+            file=sys.stderr,
+        )
+        return 2
+    if args.workers < 1 or args.scenes < 0:
+        print("error: --workers must be >= 1 and --scenes >= 0", file=sys.stderr)
+        return 2
+    config = DataGenConfig(scene=args.scene, objects=tuple(args.objects or ()), seed=args.seed,
+                           points_per_scene=args.points, noise=args.noise, renderer=args.renderer)  # fmt: skip
+    out = Path(args.out)
+    try:
+        dataset = RawDataset(out, dataset_setup())
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    done = dataset.done_scene_ids()
+    todo = [i for i in range(args.scenes) if scene_id(args.seed, i) not in done]
+    print(f"{args.scenes - len(todo)} of {args.scenes} scenes already in {out}; labelling {len(todo)} "
+          f"with {args.workers} worker(s)", file=sys.stderr)  # fmt: skip
+    if not todo:
+        return 0
+    with contextlib.ExitStack() as stack:
+        url = args.url
+        if url is None:
+            url = stack.enter_context(EmbeddedService(log_path=out / "service.log")).url
+        grasps, seconds = _run_workers(url, args, config, todo)
+    per_worker = grasps / seconds / args.workers if seconds else 0.0
+    print(
+        f"labelled {grasps} grasps in {seconds:.1f} s: {per_worker:.2f} grasps/s per worker "
+        f"({args.workers} worker(s), {1 / per_worker if per_worker else float('nan'):.3f} s per grasp point per worker)"
+    )
+    return 0
+
+
+def _run_workers(url: str, args: argparse.Namespace, config, todo: list[int]) -> tuple[int, float]:
+    context = multiprocessing.get_context("spawn")  # PyBullet and fork do not mix
+    reports = context.Queue()
+    shares = [todo[w :: args.workers] for w in range(args.workers)]
+    processes = [context.Process(target=_worker, args=(url, args.api_key, args.out, config, share, reports))
+                 for share in shares if share]  # fmt: skip
+    started = time.perf_counter()
+    for process in processes:
+        process.start()
+    bar = _progress(len(todo))
+    grasps = finished = 0
+    try:
+        while finished < len(todo):
+            try:
+                _, count, _ = reports.get(timeout=1.0)
+            except queue.Empty:
+                if not any(p.is_alive() for p in processes):
+                    break
+                continue
+            finished += 1
+            grasps += count
+            bar.update(1)
+            bar.set_postfix(grasps=grasps)
+    finally:
+        bar.close()
+        for process in processes:
+            process.join(timeout=60)
+            if process.is_alive():
+                process.terminate()
+    failed = [p.exitcode for p in processes if p.exitcode]
+    if failed:
+        raise SystemExit(f"error: {len(failed)} worker(s) failed (exit codes {failed}); rerun to resume")
+    return grasps, time.perf_counter() - started
+
+
+def _progress(total: int):
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="scene", file=sys.stderr)

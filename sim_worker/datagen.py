@@ -1,0 +1,193 @@
+"""Labelled grasp data through the service (VGN's data generation, DESIGN §4).
+
+Per scene: build a pile or packed scene, render 1-6 random views, post them to a session,
+read the fused point cloud with normals back from the service, and label 120 grasp points
+by trying 6 yaws each in simulation. The output is VGN's raw layout (client.dataset).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from client.dataset import DatasetSetup, RawDataset, SceneViews
+from client.http import VGNClient
+from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views
+from sim_worker.grasping import execute_grasp
+from sim_worker.gripper import Gripper, GripperSpec
+from sim_worker.objects import ObjectSet, object_set
+from sim_worker.scenes import generate_scene, poisson_object_count
+from sim_worker.world import WORKSPACE_SIZE, World
+
+#: VGN's region where grasp points are sampled (and later labels are valid), world frame.
+VALID_LOWER = np.array([0.02, 0.02, 0.055])
+VALID_UPPER = np.array([0.28, 0.28, 0.30])
+#: Normals must point at least this much upwards: grasps from below the table are pointless.
+MIN_NORMAL_Z = -0.1
+
+
+@dataclass(frozen=True)
+class DataGenConfig:
+    scene: str = "pile"  # pile | packed
+    objects: tuple[str, ...] = ()  # object set names or URDF folders; () = the scene's default
+    seed: int = 0
+    points_per_scene: int = 120
+    yaws: int = 6
+    max_views: int = 6
+    noise: bool = False
+    renderer: str = "auto"
+
+
+def merged_object_set(names: tuple[str, ...], scene: str) -> ObjectSet:
+    """One set from several (``--objects`` may repeat); each object keeps its own scale."""
+    sets = [object_set(name, scene) for name in (names or ("",))]
+    if len(sets) == 1:
+        return sets[0]
+    urdfs = [urdf for s in sets for urdf in s.urdfs]
+    scales = [s.base_scale(i) for s in sets for i in range(len(s))]
+    return ObjectSet("+".join(s.name for s in sets), urdfs, 1.0, scales)
+
+
+def scene_id(seed: int, index: int) -> str:
+    """Deterministic ids, so a resumed run knows which scenes are done."""
+    return f"s{seed}-{index:07d}"
+
+
+def grasp_frame(normal: np.ndarray) -> Rotation:
+    """Grasp orientation at yaw 0 for a surface normal: z = -normal (approach into the
+    surface), x chosen along world x where possible."""
+    z_axis = -normal / np.linalg.norm(normal)
+    x_axis = np.array([1.0, 0.0, 0.0])
+    if abs(x_axis @ z_axis) > 1.0 - 1e-4:
+        x_axis = np.array([0.0, 1.0, 0.0])
+    y_axis = np.cross(z_axis, x_axis)
+    y_axis /= np.linalg.norm(y_axis)
+    x_axis = np.cross(y_axis, z_axis)
+    return Rotation.from_matrix(np.column_stack([x_axis, y_axis, z_axis]))
+
+
+def middle_of_widest_run(successes: np.ndarray) -> int | None:
+    """Index in the middle of the longest run of consecutive successes (first on ties)."""
+    best: tuple[int, int] | None = None
+    start = None
+    for i, ok in enumerate([*successes, False]):
+        if ok and start is None:
+            start = i
+        elif not ok and start is not None:
+            if best is None or i - start > best[1] - best[0]:
+                best = (start, i)
+            start = None
+    return None if best is None else (best[0] + best[1] - 1) // 2
+
+
+class SceneLabeller:
+    """One simulated world and one service session, reused scene after scene."""
+
+    def __init__(self, vgn: VGNClient, config: DataGenConfig) -> None:
+        self.vgn, self.config = vgn, config
+        self.world = World(renderer=config.renderer)
+        self.gripper = Gripper(self.world)
+        self.camera = Camera(self.world, noise=DepthNoise() if config.noise else None)
+        self.objects = merged_object_set(config.objects, config.scene)
+        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
+        self.trial_seconds = 0.0
+        self.trials = 0
+
+    def close(self) -> None:
+        try:
+            self.vgn.delete_session(self.session_id)
+        finally:
+            self.world.close()
+
+    def label_scene(self, index: int) -> tuple[SceneViews, np.ndarray] | None:
+        """Views and grasp rows (qx, qy, qz, qw, x, y, z, width, label) of scene ``index``,
+        or None when the scene came out empty."""
+        rng = np.random.default_rng([self.config.seed, index])
+        self.camera.rng = rng
+        self.world.clear_objects()
+        generate_scene(self.world, self.config.scene, self.objects, poisson_object_count(rng), rng)
+        if not self.world.objects:
+            return None
+        views = self._observe(rng)
+        cloud = self.vgn.cloud(self.session_id)
+        inside = np.all((cloud[:, :3] >= VALID_LOWER) & (cloud[:, :3] <= VALID_UPPER), axis=1)
+        candidates = cloud[inside & (cloud[:, 5] > MIN_NORMAL_Z)]
+        if not len(candidates):
+            return None
+        state = self.world.save_state()
+        try:
+            rows = [self._label_point(candidates[int(rng.integers(len(candidates)))], rng, state)
+                    for _ in range(self.config.points_per_scene)]  # fmt: skip
+        finally:
+            self.world.discard_state(state)
+        return views, np.asarray(rows)
+
+    def _observe(self, rng: np.random.Generator) -> SceneViews:
+        poses = random_views(rng, int(rng.integers(1, self.config.max_views + 1)))
+        self.vgn.reset_session(self.session_id)
+        depths = []
+        for pose in poses:
+            depth = self.camera.render_depth(pose)
+            self.vgn.add_frame(self.session_id, depth, pose)
+            depths.append(depth)
+        return SceneViews(np.stack(depths), np.stack(poses))
+
+    def _label_point(self, point_normal: np.ndarray, rng: np.random.Generator, state: int) -> np.ndarray:
+        spec: GripperSpec = self.gripper.spec
+        normal = point_normal[3:] / np.linalg.norm(point_normal[3:])
+        depth = rng.uniform(-0.1 * spec.finger_depth, 1.1 * spec.finger_depth)
+        position = point_normal[:3] + normal * depth
+        frame = grasp_frame(normal)
+        yaws = np.arange(self.config.yaws) * np.pi / self.config.yaws  # [0, π)
+        labels, widths = [], []
+        for yaw in yaws:
+            self.world.restore_state(state)
+            pose = np.eye(4)
+            pose[:3, :3] = (frame * Rotation.from_euler("z", yaw)).as_matrix()
+            pose[:3, 3] = position
+            trial = execute_grasp(self.world, self.gripper, pose, allow_contact=False, remove_grasped=False,
+                                  fast=True)  # fmt: skip
+            self.trial_seconds += trial.seconds
+            self.trials += 1
+            labels.append(trial.label)
+            widths.append(trial.width)
+        best = middle_of_widest_run(np.asarray(labels, dtype=bool))
+        chosen = 0 if best is None else best
+        quaternion = (frame * Rotation.from_euler("z", yaws[chosen])).as_quat()
+        width = spec.max_opening if best is None else widths[best]
+        return np.r_[quaternion, position, width, int(best is not None)]
+
+
+def dataset_setup() -> DatasetSetup:
+    spec = GripperSpec()
+    return DatasetSetup(size=WORKSPACE_SIZE, intrinsics=SIM_INTRINSICS, max_opening_width=spec.max_opening,
+                        finger_depth=spec.finger_depth)  # fmt: skip
+
+
+def generate(
+    vgn: VGNClient, dataset: RawDataset, config: DataGenConfig, indices: list[int], report=None
+) -> None:
+    """Label the scenes ``indices`` not yet in ``dataset``; ``report(scene_id, grasps, seconds)``
+    is called after each scene is stored."""
+    done = dataset.done_scene_ids()
+    labeller = SceneLabeller(vgn, config)
+    try:
+        for index in indices:
+            sid = scene_id(config.seed, index)
+            if sid in done:
+                continue
+            started = time.perf_counter()
+            labelled = labeller.label_scene(index)
+            if labelled is None:
+                if report:
+                    report(sid, 0, time.perf_counter() - started)
+                continue
+            views, rows = labelled
+            dataset.add_scene(sid, views, rows)
+            if report:
+                report(sid, len(rows), time.perf_counter() - started)
+    finally:
+        labeller.close()
