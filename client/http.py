@@ -138,7 +138,7 @@ def encode_depth(depth: np.ndarray | bytes) -> tuple[bytes, str, str]:
         except ImportError as error:
             raise ImportError("encoding uint16 depth as PNG needs Pillow (pip install pillow)") from error
         buffer = io.BytesIO()
-        Image.fromarray(array).save(buffer, format="PNG")
+        Image.fromarray(array).save(buffer, format="PNG", compress_level=1)  # 2x faster, still ~5 KB
         return buffer.getvalue(), "depth.png", "image/png"
     if not np.issubdtype(array.dtype, np.floating):
         raise ValueError(f"depth must be float metres or uint16 PNG units, got dtype {array.dtype}")

@@ -12,6 +12,7 @@ import logging
 from collections.abc import AsyncIterator
 
 from fastapi import FastAPI
+from starlette.formparsers import MultiPartParser
 
 from service.api.errors import install_error_handlers
 from service.api.limits import BodySizeLimit
@@ -56,6 +57,11 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
     app.include_router(health)
     app.include_router(api)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_frame_bytes + MULTIPART_OVERHEAD)
+    # Starlette spools file parts over 1 MiB to disk; a 640x480 float32 frame is 1.2 MB.
+    # Bodies are already capped above, so keep whole frames in memory (halves parsing time).
+    MultiPartParser.spool_max_size = max(
+        MultiPartParser.spool_max_size, settings.max_frame_bytes + MULTIPART_OVERHEAD
+    )
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
     return app
 

@@ -42,7 +42,12 @@ class PlanningService:
     def __init__(self, settings: Settings, planner: GraspPlanner) -> None:
         self.settings = settings
         self.planner = planner
-        self.sessions = SessionStore(settings.max_sessions, settings.session_ttl_s, settings.cloud_resolution)
+        self.sessions = SessionStore(
+            settings.max_sessions,
+            settings.session_ttl_s,
+            settings.cloud_resolution,
+            settings.cloud_max_pending_frames,
+        )
 
     @classmethod
     def from_settings(cls, settings: Settings) -> PlanningService:
@@ -82,8 +87,8 @@ class PlanningService:
         """
         self.sessions.info(session_id)
         intrinsics = self._frame_intrinsics(session_id, meta.intrinsics)
-        depth = decode_depth(data, media_type, intrinsics, meta.depth_scale)
-        return self.add_frame(session_id, depth, meta.camera_pose.as_matrix(), intrinsics, meta.max_depth)
+        depth = decode_depth(data, media_type, intrinsics, meta.depth_scale)  # float32, invalid = 0
+        return self._integrate(session_id, depth, meta.camera_pose.as_matrix(), intrinsics, meta.max_depth)
 
     def add_frame(
         self,
@@ -104,15 +109,18 @@ class PlanningService:
                 f"depth has shape {depth.shape}, intrinsics say {(intrinsics.height, intrinsics.width)}"
             )
         depth = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+        return self._integrate(session_id, depth, camera_pose, intrinsics, max_depth)
+
+    def _integrate(self, session_id: str, depth: np.ndarray, camera_pose: np.ndarray, intrinsics: Intrinsics,
+                   max_depth: float) -> FrameResult:  # fmt: skip
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
             session.volume.integrate(depth, intrinsics, camera_pose, max_depth)
             elapsed_ms = (time.perf_counter() - started) * 1e3
             session.frame_count += 1
             session.integration_ms += elapsed_ms
-            return FrameResult(
-                session_id=session_id, frame_count=session.frame_count, integration_ms=round(elapsed_ms, 3)
-            )
+            return FrameResult(session_id=session_id, frame_count=session.frame_count,
+                               integration_ms=round(elapsed_ms, 3))  # fmt: skip
 
     def _frame_intrinsics(self, session_id: str, intrinsics: Intrinsics | None) -> Intrinsics:
         if intrinsics is not None:

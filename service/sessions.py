@@ -56,11 +56,17 @@ class SessionStore:
     """
 
     def __init__(
-        self, max_sessions: int, ttl_s: float, cloud_resolution: int, clock: Callable[[], float] = time.time
+        self,
+        max_sessions: int,
+        ttl_s: float,
+        cloud_resolution: int,
+        cloud_max_pending: int = 16,
+        clock: Callable[[], float] = time.time,
     ) -> None:
         self.max_sessions = max_sessions
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
+        self._cloud_max_pending = cloud_max_pending
         self._clock = clock
         self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()

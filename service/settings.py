@@ -31,6 +31,13 @@ class Settings(BaseSettings):
     cloud_resolution: int = Field(
         default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
     )
+    cloud_max_pending_frames: int = Field(
+        default=16,
+        ge=1,
+        le=256,
+        description="frames kept for the cloud volume until /cloud is asked for; past this many the "
+        "upload that exceeds it fuses them (~25 ms each at 120^3)",
+    )
 
     @field_validator("model", "api_key", mode="before")
     @classmethod

@@ -1,0 +1,604 @@
+"""Latency benchmark: what the service costs on top of calling Open3D and VGN directly.
+
+    python -m benchmarks.latency [--repeats N] [--model PATH] [--threads T] [--json PATH]
+
+One run measures the p50 and p95 latency (milliseconds) of
+
+1. fusing a 640×480 float32 depth frame *directly* with Open3D, building the ``RGBDImage``
+   per frame with ``create_from_color_and_depth`` as a naive user would (the baseline), and
+   with ``service.tsdf.TSDFVolume.integrate`` (the service's cached-buffer path);
+2. uploading a frame in process: ``PlanningService.add_frame`` (numpy) and
+   ``PlanningService.add_encoded_frame`` (raw float32 bytes, and a 16-bit PNG, decoded + fused);
+3. uploading a frame over HTTP to a real uvicorn child process (``EmbeddedService``) with
+   ``VGNClient.add_frame``: raw float32, and a uint16 millimetre array sent as a 16-bit PNG;
+4. running VGN *directly* (the baseline): a forward pass under ``torch.inference_mode`` on a
+   (1, 1, 40, 40, 40) grid fused from 6 views, then ``detect_grasps`` at threshold 0.9 —
+   forward alone, detection alone, and their per-iteration sum;
+5. a grasp request in process: ``PlanningService.plan``;
+6. a grasp request over HTTP: ``VGNClient.grasps``;
+
+and checks the project's latency targets:
+
+* a frame request over HTTP (raw float32) has p50 <= 10 ms;
+* a grasp request over HTTP has p50 <= 1.3 × the p50 of the direct forward + detection.
+
+Why: the service is only worth putting between a robot and VGN if what it adds — sessions,
+multipart parsing, decoding, validation, JSON and the HTTP round trip — is small next to the
+work itself. Timing every layer beside the bare Open3D/torch calls, in the same run on the
+same machine, shows where the overhead lives.
+
+By default the operations run *interleaved*: each round times one call of every operation,
+so slow drifts of the machine (shared or throttled virtual CPUs) hit every row alike and the
+ratios stay meaningful; ``--schedule blocks`` times each operation's calls back to back
+instead. Each operation gets ``--warmup`` untimed calls first. Frame uploads keep going to one
+session per row, so every 9th of them also pays the service's deferred fusion into the fine
+(cloud) volume, as it would in real use; that shows in p95, not in p50.
+
+Depth frames are exact renderings of ``tests.scenes.BoxScene`` from ``circle_views()``. When
+no ``--model`` is given, random-initialised VGN weights are written to a temporary directory:
+the network's cost does not depend on its weights, but the *number of grasps* does, and with
+it part of detection and the size of the response (random weights rarely reach quality 0.9,
+so a trained model may return more grasps than this run sees).
+
+The benchmark process and the server share the machine's cores (the client waits while the
+server works, so they do not compute at the same time). Torch in this process and in the
+server use the same thread count (``--threads``, default: torch's default here, which is the
+number of cores); Open3D uses its own thread pool in both. On small virtual machines the
+forward pass with more than one torch thread depends on OpenMP's wait policy
+(``OMP_WAIT_POLICY``, ``GOMP_SPINCOUNT``, inherited by the server) and on other load, so
+compare runs made with the same ``--threads`` and environment; the load average is printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import open3d as o3d
+import torch
+
+from client.embedded import EmbeddedService
+from client.http import VGNClient, encode_depth
+from client.schemas import FrameMeta, GraspQuery, Pose, SessionCreate
+from service.core import PlanningService
+from service.planner import resolve_device
+from service.settings import Settings
+from service.tsdf import TRUNCATION_VOXELS, TSDFVolume
+from service.vgn.checkpoint import load_vgn, save_vgn
+from service.vgn.detection import DetectionConfig, detect_grasps
+from service.vgn.network import VGN
+from tests.scenes import INTRINSICS, BoxScene, circle_views
+
+warnings.filterwarnings("ignore", category=DeprecationWarning)
+
+WORKSPACE_SIZE = 0.3
+RESOLUTION = 40
+MAX_DEPTH = 2.0
+DEPTH_SCALE = 1000.0  # PNG units per metre: millimetres
+THRESHOLD = 0.9
+VIEWS = 6
+FRAME_TARGET_MS = 10.0
+GRASP_RATIO_TARGET = 1.3
+RAW_MEDIA_TYPE = "application/octet-stream"
+PNG_MEDIA_TYPE = "image/png"
+
+FRAME_HTTP = "VGNClient.add_frame (raw f32)"
+GRASPS_HTTP = "VGNClient.grasps"
+FORWARD = "VGN forward (inference_mode)"
+DETECTION = f"detect_grasps (threshold {THRESHOLD})"
+FORWARD_DETECTION = "forward + detection"
+
+
+# Measurement -------------------------------------------------------------------------------
+@dataclass
+class Operation:
+    """One thing to time: ``call(i)`` is the i-th call (warm-up calls included)."""
+
+    name: str
+    group: str
+    call: Callable[[int], object]
+    note: str = ""
+
+
+@dataclass
+class Measurement:
+    """Latency samples (ms) of one named operation."""
+
+    name: str
+    group: str
+    samples_ms: list[float] = field(default_factory=list)
+    note: str = ""
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(self.samples_ms, q)) if self.samples_ms else float("nan")
+
+    @property
+    def p50(self) -> float:
+        return self.percentile(50)
+
+    @property
+    def p95(self) -> float:
+        return self.percentile(95)
+
+    def as_dict(self) -> dict[str, Any]:
+        mean = statistics.fmean(self.samples_ms) if self.samples_ms else float("nan")
+        return {
+            "name": self.name,
+            "group": self.group,
+            "p50_ms": round(self.p50, 4),
+            "p95_ms": round(self.p95, 4),
+            "mean_ms": round(mean, 4),
+            "n": len(self.samples_ms),
+            "note": self.note,
+            "samples_ms": self.samples_ms,
+        }
+
+
+def timed(call: Callable[[int], object], i: int) -> float:
+    """Milliseconds ``call(i)`` takes."""
+    started = time.perf_counter()
+    call(i)
+    return (time.perf_counter() - started) * 1e3
+
+
+def run_interleaved(operations: list[Operation], repeats: int, warmup: int) -> list[Measurement]:
+    """Round-robin: each round calls every operation once; the first ``warmup`` rounds are
+    not recorded."""
+    rows = [Measurement(op.name, op.group, note=op.note) for op in operations]
+    for i in range(warmup + repeats):
+        for op, row in zip(operations, rows, strict=True):
+            elapsed = timed(op.call, i)
+            if i >= warmup:
+                row.samples_ms.append(elapsed)
+    return rows
+
+
+def run_blocks(operations: list[Operation], repeats: int, warmup: int) -> list[Measurement]:
+    """Each operation's ``warmup`` untimed and ``repeats`` timed calls back to back."""
+    rows = []
+    for op in operations:
+        for i in range(warmup):
+            op.call(i)
+        samples = [timed(op.call, i) for i in range(warmup, warmup + repeats)]
+        rows.append(Measurement(op.name, op.group, samples, op.note))
+    return rows
+
+
+def sum_of(name: str, parts: list[Measurement], note: str = "") -> Measurement:
+    """Per-iteration sum of operations that ran one after the other in each iteration."""
+    samples = [sum(values) for values in zip(*(p.samples_ms for p in parts), strict=True)]
+    return Measurement(name, parts[0].group, samples, note)
+
+
+# Inputs --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Frames:
+    """The benchmark's depth frames, one per view, in every form the service accepts."""
+
+    poses: list[np.ndarray]  # camera -> world (= workspace: the workspace sits at the origin)
+    depths: list[np.ndarray]  # (H, W) float32 metres
+    millimetres: list[np.ndarray]  # (H, W) uint16
+    raw: list[bytes]  # little-endian float32
+    png: list[bytes]  # 16-bit PNG of ``millimetres``
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+
+def render_frames(count: int = VIEWS) -> Frames:
+    scene = BoxScene()
+    poses = circle_views(count)
+    depths = [scene.depth(pose, INTRINSICS) for pose in poses]
+    millimetres = [np.round(d * DEPTH_SCALE).astype(np.uint16) for d in depths]
+    return Frames(
+        poses,
+        depths,
+        millimetres,
+        [encode_depth(d)[0] for d in depths],
+        [encode_depth(m)[0] for m in millimetres],
+    )
+
+
+def weights_path(model: Path | None, directory: Path) -> tuple[Path, bool]:
+    """The weights to benchmark and whether they are random (then written to ``directory``)."""
+    if model is not None:
+        return model, False
+    torch.manual_seed(0)
+    path = directory / "random-vgn.safetensors"
+    save_vgn(VGN(), path)
+    return path, True
+
+
+# 1. Fusion -----------------------------------------------------------------------------------
+def naive_volume() -> o3d.pipelines.integration.UniformTSDFVolume:
+    voxel = WORKSPACE_SIZE / RESOLUTION
+    return o3d.pipelines.integration.UniformTSDFVolume(
+        length=WORKSPACE_SIZE,
+        resolution=RESOLUTION,
+        sdf_trunc=TRUNCATION_VOXELS * voxel,
+        color_type=o3d.pipelines.integration.TSDFVolumeColorType.NoColor,
+    )
+
+
+def naive_integrate(
+    volume: o3d.pipelines.integration.UniformTSDFVolume,
+    depth: np.ndarray,
+    intrinsic: o3d.camera.PinholeCameraIntrinsic,
+    pose: np.ndarray,
+) -> None:
+    """What a user without the service writes: new Open3D images and RGBDImage every frame."""
+    color = o3d.geometry.Image(np.zeros((*depth.shape, 3), dtype=np.uint8))
+    rgbd = o3d.geometry.RGBDImage.create_from_color_and_depth(
+        color,
+        o3d.geometry.Image(depth),
+        depth_scale=1.0,
+        depth_trunc=MAX_DEPTH,
+        convert_rgb_to_intensity=False,
+    )
+    volume.integrate(rgbd, intrinsic, np.linalg.inv(pose))
+
+
+def fusion_operations(frames: Frames) -> list[Operation]:
+    i, n = INTRINSICS, len(frames)
+    intrinsic = o3d.camera.PinholeCameraIntrinsic(i.width, i.height, i.fx, i.fy, i.cx, i.cy)
+    naive, cached = naive_volume(), TSDFVolume(WORKSPACE_SIZE, RESOLUTION)
+
+    def direct(k: int) -> None:
+        naive_integrate(naive, frames.depths[k % n], intrinsic, frames.poses[k % n])
+
+    def ours(k: int) -> None:
+        cached.integrate(frames.depths[k % n], INTRINSICS, frames.poses[k % n], MAX_DEPTH)
+
+    return [
+        Operation("direct Open3D integrate (naive RGBDImage)", "1 fusion", direct, "baseline"),
+        Operation("TSDFVolume.integrate (cached buffer)", "1 fusion", ours),
+    ]
+
+
+# 2 + 5. The planning core in process -------------------------------------------------------
+def new_session(core: PlanningService) -> str:
+    """An empty session with the benchmark's intrinsics."""
+    return core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+
+
+def core_frame_operations(core: PlanningService, frames: Frames) -> list[Operation]:
+    n, group = len(frames), "2 frame in-process"
+    metas = [
+        FrameMeta(camera_pose=Pose.from_matrix(p), depth_scale=DEPTH_SCALE, max_depth=MAX_DEPTH)
+        for p in frames.poses
+    ]
+    numpy_id, raw_id, png_id = (new_session(core) for _ in range(3))
+
+    def numpy_frame(k: int) -> None:
+        core.add_frame(numpy_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
+    def raw_frame(k: int) -> None:
+        core.add_encoded_frame(raw_id, frames.raw[k % n], RAW_MEDIA_TYPE, metas[k % n])
+
+    def png_frame(k: int) -> None:
+        core.add_encoded_frame(png_id, frames.png[k % n], PNG_MEDIA_TYPE, metas[k % n])
+
+    return [
+        Operation("PlanningService.add_frame (numpy)", group, numpy_frame),
+        Operation("PlanningService.add_encoded_frame (raw f32)", group, raw_frame),
+        Operation("PlanningService.add_encoded_frame (PNG16)", group, png_frame),
+    ]
+
+
+def core_plan_operation(core: PlanningService, frames: Frames, query: GraspQuery) -> tuple[Operation, int]:
+    """``PlanningService.plan`` on a session with every view fused, and its grasp count."""
+    session_id = new_session(core)
+    for depth, pose in zip(frames.depths, frames.poses, strict=True):
+        core.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+    grasps = len(core.plan(session_id, query).grasps)
+    operation = Operation(
+        "PlanningService.plan", "5 grasps in-process", lambda k: core.plan(session_id, query)
+    )
+    return operation, grasps
+
+
+# 4. Network baseline -------------------------------------------------------------------------
+def fused_grid(frames: Frames) -> np.ndarray:
+    volume = TSDFVolume(WORKSPACE_SIZE, RESOLUTION)
+    for depth, pose in zip(frames.depths, frames.poses, strict=True):
+        volume.integrate(depth, INTRINSICS, pose, MAX_DEPTH)
+    return volume.grid()
+
+
+def network_operations(weights: Path, device: torch.device, grid: np.ndarray) -> tuple[list[Operation], int]:
+    """Direct forward then direct detection (run in this order; detection reads the
+    forward's output), and the grasp count."""
+    network = load_vgn(weights).to(device)
+    tensor = torch.from_numpy(grid)[None, None].to(device)
+    voxel_size, pose = WORKSPACE_SIZE / RESOLUTION, np.eye(4)
+    config = DetectionConfig(threshold=THRESHOLD)
+    output: list[np.ndarray] = []
+
+    def forward(_: int) -> None:
+        with torch.inference_mode():
+            quality, rotation, width = network(tensor)
+        output[:] = [quality[0, 0].cpu().numpy(), rotation[0].cpu().numpy(), width[0, 0].cpu().numpy()]
+
+    def detect(_: int) -> int:
+        return len(detect_grasps(grid, *output, voxel_size, pose, config))
+
+    group = "4 network direct"
+    forward(0)
+    return [
+        Operation(FORWARD, group, forward, "baseline"),
+        Operation(DETECTION, group, detect, "baseline"),
+    ], detect(0)
+
+
+# 3 + 6. Over HTTP --------------------------------------------------------------------------
+@contextlib.contextmanager
+def running_service(weights: Path, threads: int, device: str) -> Iterator[VGNClient]:
+    """A real uvicorn child process on loopback, and a client talking to it."""
+    env = {"VGN_TORCH_THREADS": str(threads), "VGN_DEVICE": device, "VGN_API_KEY": ""}
+    with EmbeddedService(model=weights, env=env) as service, VGNClient(service.url) as client:
+        yield client
+
+
+def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
+    n, group = len(frames), "3 frame HTTP"
+    raw_id = client.create_session(intrinsics=INTRINSICS).session_id
+    png_id = client.create_session(intrinsics=INTRINSICS).session_id
+
+    def raw_frame(k: int) -> None:
+        client.add_frame(raw_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
+    def png_frame(k: int) -> None:
+        client.add_frame(
+            png_id,
+            frames.millimetres[k % n],
+            frames.poses[k % n],
+            depth_scale=DEPTH_SCALE,
+            max_depth=MAX_DEPTH,
+        )
+
+    return [
+        Operation(FRAME_HTTP, group, raw_frame, "target"),
+        Operation("VGNClient.add_frame (PNG16 from uint16 mm)", group, png_frame),
+    ]
+
+
+def http_grasp_operation(client: VGNClient, frames: Frames) -> tuple[Operation, int]:
+    """``VGNClient.grasps`` on a session with every view fused, and its grasp count."""
+    session_id = client.create_session(intrinsics=INTRINSICS).session_id
+    for depth, pose in zip(frames.depths, frames.poses, strict=True):
+        client.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+    grasps = len(client.grasps(session_id, threshold=THRESHOLD).grasps)
+    operation = Operation(
+        GRASPS_HTTP, "6 grasps HTTP", lambda k: client.grasps(session_id, threshold=THRESHOLD), "target"
+    )
+    return operation, grasps
+
+
+# Report ------------------------------------------------------------------------------------
+def find(rows: list[Measurement], name: str) -> Measurement:
+    return next(row for row in rows if row.name == name)
+
+
+def targets(rows: list[Measurement]) -> list[dict[str, Any]]:
+    frame = find(rows, FRAME_HTTP).p50
+    ratio = find(rows, GRASPS_HTTP).p50 / find(rows, FORWARD_DETECTION).p50
+    return [
+        {
+            "name": "frame request over HTTP p50 (raw f32)",
+            "value": round(frame, 3),
+            "unit": "ms",
+            "target": FRAME_TARGET_MS,
+            "pass": frame <= FRAME_TARGET_MS,
+        },
+        {
+            "name": "grasp request over HTTP p50 / direct forward+detection p50",
+            "value": round(ratio, 3),
+            "unit": "x",
+            "target": GRASP_RATIO_TARGET,
+            "pass": ratio <= GRASP_RATIO_TARGET,
+        },
+    ]
+
+
+def format_table(rows: list[Measurement]) -> str:
+    width = max(len(row.name) for row in rows) + 2
+    header = f"{'group':<20}{'name':<{width}}{'p50 ms':>9}{'p95 ms':>9}{'n':>5}  note"
+    lines = [header, "-" * (len(header) + 4)]
+    for row in rows:
+        lines.append(
+            f"{row.group:<20}{row.name:<{width}}{row.p50:>9.2f}{row.p95:>9.2f}"
+            f"{len(row.samples_ms):>5}  {row.note}"
+        )
+    return "\n".join(lines)
+
+
+def format_targets(checks: list[dict[str, Any]]) -> str:
+    lines = []
+    for check in checks:
+        unit = " ms" if check["unit"] == "ms" else "x"
+        verdict = "PASS" if check["pass"] else "MISS"
+        lines.append(
+            f"  {check['name']}: {check['value']:.2f}{unit} (target <= {check['target']:g}{unit})  {verdict}"
+        )
+    return "\n".join(lines)
+
+
+def environment(args: argparse.Namespace, weights: Path, random_weights: bool) -> dict[str, Any]:
+    return {
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "open3d": o3d.__version__,
+        "cpu_count": os.cpu_count(),
+        "torch_threads": args.threads,
+        "device": str(resolve_device(args.device)),
+        "repeats": args.repeats,
+        "warmup": args.warmup,
+        "schedule": args.schedule,
+        "weights": str(weights),
+        "random_weights": random_weights,
+        "frame": f"{INTRINSICS.width}x{INTRINSICS.height} float32",
+        "grid": f"{RESOLUTION}^3 from {VIEWS} views",
+        "threshold": THRESHOLD,
+        "load_average_at_start": load_average(),
+    }
+
+
+def load_average() -> list[float]:
+    """1, 5 and 15 minute load averages: other work on the machine skews every row."""
+    return [round(value, 2) for value in os.getloadavg()] if hasattr(os, "getloadavg") else []
+
+
+def format_header(env: dict[str, Any]) -> str:
+    weights = (
+        "random-initialised (the network's cost does not depend on its weights; the number of grasps does)"
+        if env["random_weights"]
+        else env["weights"]
+    )
+    return "\n".join(
+        [
+            f"vgn-service latency benchmark: {env['repeats']} timed + {env['warmup']} warm-up "
+            f"calls per operation, schedule {env['schedule']}",
+            f"  python {env['python']}, torch {env['torch']}, open3d {env['open3d']}, "
+            f"{env['cpu_count']} CPU cores, device {env['device']}",
+            f"  torch threads: {env['torch_threads']} in this process and in the server "
+            "(VGN_TORCH_THREADS); benchmark and server share the cores",
+            f"  weights: {weights}",
+            f"  input: {env['frame']} BoxScene depth frames; grid {env['grid']}; "
+            f"threshold {env['threshold']}",
+            f"  load average at start (1/5/15 min): {env['load_average_at_start']}",
+        ]
+    )
+
+
+def write_json(path: Path, payload: dict[str, Any]) -> None:
+    """Write ``payload`` atomically: a temp file in the same directory, then ``os.replace``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(handle, "w") as stream:
+            json.dump(payload, stream, indent=2)
+            stream.write("\n")
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(temporary)
+        raise
+
+
+# Main --------------------------------------------------------------------------------------
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.latency",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--repeats", type=int, default=50, help="timed calls per operation")
+    parser.add_argument(
+        "--warmup",
+        type=int,
+        default=5,
+        help="untimed calls per operation before timing (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="VGN weights (.safetensors/.pt/.pth); default: random weights",
+    )
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=torch.get_num_threads(),
+        help="torch threads here and in the server (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--device",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="torch device of the baseline, the core and the server",
+    )
+    parser.add_argument(
+        "--schedule",
+        choices=("interleaved", "blocks"),
+        default="interleaved",
+        help="round-robin over operations, or each operation back to back",
+    )
+    parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    args = parser.parse_args(argv)
+    if args.repeats < 1 or args.warmup < 0 or args.threads < 1:
+        parser.error("--repeats and --threads must be >= 1, --warmup >= 0")
+    return args
+
+
+def measure_all(args: argparse.Namespace, weights: Path) -> tuple[list[Measurement], dict[str, int]]:
+    """Every measurement in table order, and the grasp count each grasp path returns."""
+    frames = render_frames()
+    core = PlanningService.from_settings(
+        Settings(model=weights, torch_threads=args.threads, device=args.device, api_key=None)
+    )
+    network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
+    plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
+    with running_service(weights, args.threads, args.device) as client:
+        grasps_http, http_grasps = http_grasp_operation(client, frames)
+        operations = (
+            fusion_operations(frames)
+            + core_frame_operations(core, frames)
+            + http_frame_operations(client, frames)
+            + network
+            + [plan, grasps_http]
+        )
+        schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
+        rows = schedule(operations, args.repeats, args.warmup)
+    total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
+    rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
+    return rows, {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    torch.set_num_threads(args.threads)
+    with tempfile.TemporaryDirectory(prefix="vgn-bench-") as directory:
+        weights, random_weights = weights_path(args.model, Path(directory))
+        env = environment(args, weights, random_weights)
+        print(format_header(env), flush=True)
+        rows, grasps = measure_all(args, weights)
+    checks = targets(rows)
+    env["load_average_at_end"] = load_average()
+    print()
+    print(format_table(rows))
+    print(
+        f"\ngrasps returned at threshold {THRESHOLD}: direct {grasps['direct']}, "
+        f"in-process {grasps['in_process']}, HTTP {grasps['http']}"
+    )
+    print(f"load average at end (1/5/15 min): {env['load_average_at_end']}")
+    print("targets:")
+    print(format_targets(checks))
+    if args.json is not None:
+        write_json(
+            args.json,
+            {
+                "environment": env,
+                "grasps": grasps,
+                "targets": checks,
+                "results": [row.as_dict() for row in rows],
+            },
+        )
+        print(f"\nresults written to {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,60 @@
+"""VGN's augmentations, applied to a grid and its labels together so they stay aligned.
+
+Grids are indexed [x, y, z] (DESIGN §2). A z-rotation by k × 90° is ``torch.rot90`` over the
+x, y axes about the volume centre; it maps voxel (i, j) to (N-1-j, i) per quarter turn, and
+the grasp orientations turn by the same rotation about the workspace z axis (q' = R_z ⊗ q).
+A z shift moves grid and labels by whole voxels, filling with 0 (unobserved) and dropping
+labels that leave the grid.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from service.training.labels import LabelSet
+from service.training.quaternions import about_z, multiply
+
+#: Largest z shift in voxels (both ways).
+MAX_Z_SHIFT = 4
+
+
+def rotate_z(grid: torch.Tensor, labels: LabelSet, quarter_turns: int) -> tuple[torch.Tensor, LabelSet]:
+    """Turn the (N, N, N) grid and its labels by ``quarter_turns`` × 90° about +z."""
+    k = quarter_turns % 4
+    if k == 0:
+        return grid, labels
+    n = grid.shape[0]
+    rotated = torch.rot90(grid, k, dims=(0, 1))
+    i, j, z = labels.voxel.unbind(-1)
+    for _ in range(k):
+        i, j = n - 1 - j, i
+    turn = about_z(k * math.pi / 2, labels.quaternion.dtype)
+    quaternion = multiply(turn.expand_as(labels.quaternion), labels.quaternion)
+    return rotated, LabelSet(torch.stack([i, j, z], dim=-1), quaternion, labels.width, labels.label)
+
+
+def shift_z(grid: torch.Tensor, labels: LabelSet, voxels: int) -> tuple[torch.Tensor, LabelSet]:
+    """Move the grid and its labels ``voxels`` along +z (negative: down), zero-filling."""
+    if voxels == 0:
+        return grid, labels
+    n = grid.shape[2]
+    shifted = torch.zeros_like(grid)
+    if voxels > 0:
+        shifted[:, :, voxels:] = grid[:, :, : n - voxels]
+    else:
+        shifted[:, :, : n + voxels] = grid[:, :, -voxels:]
+    voxel = labels.voxel.clone()
+    voxel[:, 2] += voxels
+    moved = LabelSet(voxel, labels.quaternion, labels.width, labels.label)
+    return shifted, moved.select((voxel[:, 2] >= 0) & (voxel[:, 2] < n))
+
+
+def random_augment(
+    grid: torch.Tensor, labels: LabelSet, rng: np.random.Generator, max_shift: int = MAX_Z_SHIFT
+) -> tuple[torch.Tensor, LabelSet]:
+    """A uniformly random quarter-turn about z, then a shift in U{-max_shift..max_shift}."""
+    grid, labels = rotate_z(grid, labels, int(rng.integers(4)))
+    return shift_z(grid, labels, int(rng.integers(-max_shift, max_shift + 1)))

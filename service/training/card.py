@@ -1,0 +1,80 @@
+"""The model card: a JSON file beside the weights saying what they were trained on and how
+well they did, so a weights file is never an anonymous blob."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import subprocess
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from service.vgn.checkpoint import weights_id
+from service.vgn.network import PARAMETER_COUNT
+
+CARD_FORMAT = 1
+
+
+def card_path(out: Path) -> Path:
+    """``vgn.safetensors`` → ``vgn.card.json`` beside it."""
+    return out.with_suffix(".card.json")
+
+
+def code_version() -> dict[str, str | None]:
+    """The package version and, when running from a git checkout, ``git describe``."""
+    try:
+        package = metadata.version("vgn-service")
+    except metadata.PackageNotFoundError:
+        package = None
+    try:
+        described = subprocess.run(
+            ["git", "describe", "--always", "--dirty", "--tags"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        described = None
+    return {"package": package, "git": described or None}
+
+
+def build_card(
+    *,
+    weights: Path,
+    datasets: list[dict[str, Any]],
+    training: dict[str, Any],
+    history: list[dict[str, Any]],
+    best: dict[str, Any] | None,
+    command: list[str],
+) -> dict[str, Any]:
+    """The card's content; ``weights`` must already be written (its content id is recorded)."""
+    return {
+        "format": CARD_FORMAT,
+        "model": {
+            "architecture": "VGN (Breyer et al., CoRL 2020)",
+            "parameters": PARAMETER_COUNT,
+            "weights": weights.name,
+            "weights_id": weights_id(weights),
+            "resolution": training.get("resolution"),
+            "input": "TSDF grid (N,N,N) indexed [x,y,z], (tsdf+1)/2 where observed, else 0",
+        },
+        "datasets": datasets,
+        "training": training,
+        "epochs": len(history),
+        "metrics": {"final": history[-1] if history else None, "best": best},
+        "history": history,
+        "code_version": code_version(),
+        "command": command,
+        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def write_card(card: dict[str, Any], path: Path) -> None:
+    """Write the card as strict JSON (no NaN), atomically."""
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    temporary.write_text(json.dumps(card, indent=2, allow_nan=False) + "\n")
+    temporary.replace(path)

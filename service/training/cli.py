@@ -1,0 +1,191 @@
+"""``vgn-train``: train VGN weights from raw VGN datasets (see ``vgn-train --help``)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+import torch
+
+from service.training import report
+from service.training.checkpoint import CheckpointMismatch, checkpoint_path
+from service.training.grids import MAX_DEPTH, RESOLUTION
+from service.training.train import TrainConfig, TrainingError, TrainResult, train
+
+DESCRIPTION = """\
+Train the Volumetric Grasping Network on one or more raw VGN datasets (the layout that
+`setup.json`, `grasps.csv` and `scenes/*.npz` make up; the sim worker writes it, and public
+VGN/GIGA raw datasets use it too).
+
+Each scene's depth images are fused into a 40^3 TSDF grid with the service's own TSDF code
+and cached (by default in <data>/.cache/). One forward pass per scene scores every labelled
+voxel of it with VGN's loss; training augments with z turns of 90 degrees and z shifts.
+Scenes are split into training and validation by scene, fixed by --seed.
+
+Writes OUT (.safetensors weights for the service: VGN_MODEL=OUT), OUT's .card.json (model
+card: data, settings, metrics, command, code version) and OUT's .ckpt.pt (the training
+state after each epoch, for --resume).
+"""
+
+EPILOG = """\
+examples:
+  vgn-train --data data/pile --data data/packed --epochs 10 --out models/vgn.safetensors
+  vgn-train --data data/pile --epochs 20 --out models/vgn.safetensors --resume   # 10 more epochs
+  VGN_MODEL=models/vgn.safetensors uvicorn service.app:app                      # serve them
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="vgn-train",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    data = parser.add_argument_group("data")
+    data.add_argument(
+        "--data",
+        metavar="DIR",
+        type=Path,
+        action="append",
+        required=True,
+        help="a raw VGN dataset folder; repeat to train on several",
+    )
+    data.add_argument(
+        "--cache",
+        metavar="DIR",
+        type=Path,
+        default=None,
+        help="where to cache fused grids (default: <data>/.cache/grids-<N>-<key>)",
+    )
+    data.add_argument(
+        "--val-fraction",
+        type=float,
+        default=0.1,
+        help="share of scenes held out for validation (default 0.1; 0 = none)",
+    )
+    data.add_argument(
+        "--resolution",
+        type=int,
+        default=RESOLUTION,
+        help=f"grid voxels a side (default {RESOLUTION}, VGN's; a multiple of 8)",
+    )
+    data.add_argument(
+        "--max-depth",
+        type=float,
+        default=MAX_DEPTH,
+        help=f"ignore depth readings beyond this many metres (default {MAX_DEPTH}, as the service)",
+    )
+    data.add_argument(
+        "--no-augment",
+        dest="augment",
+        action="store_false",
+        help="turn off the z-rotation and z-shift augmentations",
+    )
+
+    run = parser.add_argument_group("training")
+    run.add_argument(
+        "--out",
+        metavar="FILE.safetensors",
+        type=Path,
+        required=True,
+        help="weights to write; the card and checkpoint go beside it",
+    )
+    run.add_argument("--epochs", type=int, default=10, help="total epochs of the run (default 10, VGN's)")
+    run.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate (default 3e-4, VGN's)")
+    run.add_argument(
+        "--batch-scenes",
+        type=int,
+        default=4,
+        help="scenes per optimiser step; each brings all its labels (default 4)",
+    )
+    run.add_argument("--seed", type=int, default=0, help="fixes split, order and augmentations (default 0)")
+    run.add_argument(
+        "--resume", action="store_true", help="continue the run in OUT's checkpoint up to --epochs in total"
+    )
+    run.add_argument("--fresh", action="store_true", help="start over even though a checkpoint exists")
+
+    machine = parser.add_argument_group("machine")
+    machine.add_argument(
+        "--device",
+        choices=["auto", "cpu", "cuda"],
+        default="auto",
+        help="auto = the GPU when there is one (default)",
+    )
+    machine.add_argument(
+        "--workers",
+        type=int,
+        default=0,
+        help="processes fusing grids and loading batches (default 0 = in this process)",
+    )
+    machine.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    machine.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
+    return parser
+
+
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    return TrainConfig(
+        data=args.data,
+        out=args.out,
+        epochs=args.epochs,
+        lr=args.lr,
+        batch_scenes=args.batch_scenes,
+        val_fraction=args.val_fraction,
+        seed=args.seed,
+        device=args.device,
+        cache=args.cache,
+        workers=args.workers,
+        resolution=args.resolution,
+        max_depth=args.max_depth,
+        augment=args.augment,
+        resume=args.resume,
+        fresh=args.fresh,
+        progress=args.progress,
+    )
+
+
+def summary(result: TrainResult) -> str:
+    """The end-of-run report: the epoch table, the best epoch and the files written."""
+    lines = ["", report.table(result.history)]
+    if result.best is not None:
+        lines.append(
+            f"best epoch: {result.best['epoch']} (lowest {'val' if result.val_scenes else 'train'} loss)"
+        )
+    scenes = sum(d.scenes for d in result.datasets)
+    grasps = sum(d.grasps for d in result.datasets)
+    lines += [
+        f"data: {len(result.datasets)} dataset(s), {scenes} scenes, {grasps} labels "
+        f"({result.train_scenes} train / {result.val_scenes} val scenes)",
+        f"weights:    {result.weights}",
+        f"model card: {result.card}",
+        f"checkpoint: {result.checkpoint}",
+        f"serve with: VGN_MODEL={result.weights} uvicorn service.app:app",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    config = config_from_args(args)
+    command = ["vgn-train", *(sys.argv[1:] if argv is None else argv)]
+    try:
+        result = train(config, command=[shlex.join(command)])
+    except (TrainingError, CheckpointMismatch, FileNotFoundError, ValueError) as error:
+        print(f"vgn-train: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(
+            f"\nvgn-train: interrupted; continue with --resume (checkpoint: {checkpoint_path(config.out)})",
+            file=sys.stderr,
+        )
+        return 130
+    print(summary(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,238 @@
+"""Scenes of one or more raw VGN datasets as training samples: a grid plus all its labels.
+
+VGN trained on one labelled voxel per sample; here a sample is a whole scene, so one
+forward pass serves every labelled voxel of it. Scenes of a batch are stacked and their
+labels concatenated with a scene index, which the loss uses to gather predictions.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset
+from tqdm import tqdm
+
+from client.dataset import RawDataset
+from service.training.augment import random_augment
+from service.training.grids import GridSource, cache_dir, cache_key, ensure_cached
+from service.training.labels import LabelSet
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One scene: where its grid comes from and its labels (voxel units)."""
+
+    dataset: int
+    scene_id: str
+    source: GridSource
+    labels: LabelSet
+    voxel_size: float
+
+    @property
+    def key(self) -> str:
+        """Unique across the datasets of a run: ``<dataset index>/<scene id>``."""
+        return f"{self.dataset}/{self.scene_id}"
+
+
+@dataclass
+class DatasetSummary:
+    """What one raw dataset contributed, for logs and the model card."""
+
+    path: str
+    size: float
+    scenes: int
+    grasps: int
+    positives: int
+    negatives: int
+    outside_grid: int
+    missing_scene_files: int
+    cache: str
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def load_scenes(
+    data_dirs: list[Path], resolution: int, max_depth: float, cache_root: Path | None = None
+) -> tuple[list[Scene], list[DatasetSummary]]:
+    """Scenes with at least one label inside the grid, in a stable order, and per-dataset counts.
+
+    Raises ``FileNotFoundError`` for a folder that is not a raw dataset.
+    """
+    scenes: list[Scene] = []
+    summaries: list[DatasetSummary] = []
+    for index, data_dir in enumerate(data_dirs):
+        dataset = RawDataset(Path(data_dir))
+        setup = dataset.setup
+        voxel_size = setup.size / resolution
+        key = cache_key(setup, resolution, max_depth)
+        grids_dir = cache_dir(dataset.root, cache_root, resolution, key)
+        ids, rows = dataset.grasps()
+        summary = DatasetSummary(str(dataset.root.resolve()), setup.size, 0, 0, 0, 0, 0, 0, str(grids_dir))
+        for scene_id, scene_rows in _group_rows(ids, rows):
+            scene_path = dataset.scenes_dir / f"{scene_id}.npz"
+            if not scene_path.is_file():
+                summary.missing_scene_files += 1
+                continue
+            labels, outside = LabelSet.from_rows(scene_rows, voxel_size, resolution)
+            summary.outside_grid += outside
+            if not len(labels):
+                continue
+            source = GridSource(scene_path, grids_dir / f"{scene_id}.npz", setup, resolution, max_depth, key)
+            scenes.append(Scene(index, scene_id, source, labels, voxel_size))
+            positives = int(labels.label.sum())
+            summary.scenes += 1
+            summary.grasps += len(labels)
+            summary.positives += positives
+            summary.negatives += len(labels) - positives
+        summaries.append(summary)
+    return scenes, summaries
+
+
+def _group_rows(ids: list[str], rows: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Rows of each scene id, ids sorted."""
+    if not ids:
+        return []
+    names, inverse = np.unique(np.asarray(ids), return_inverse=True)
+    order = np.argsort(inverse, kind="stable")
+    bounds = np.searchsorted(inverse[order], np.arange(len(names) + 1))
+    return [(str(name), rows[order[bounds[n] : bounds[n + 1]]]) for n, name in enumerate(names)]
+
+
+def split_scenes(scenes: list[Scene], val_fraction: float, seed: int) -> tuple[list[Scene], list[Scene]]:
+    """Train and validation scenes, split by scene (never by grasp) and fixed by ``seed``.
+
+    At least one scene goes to validation when ``val_fraction`` > 0 and there are two or
+    more scenes; at least one always stays for training.
+    """
+    if not 0.0 <= val_fraction < 1.0:
+        raise ValueError(f"val_fraction must be in [0, 1), got {val_fraction}")
+    count = len(scenes)
+    val_count = 0
+    if val_fraction > 0 and count >= 2:
+        val_count = min(count - 1, max(1, round(val_fraction * count)))
+    order = np.random.default_rng(seed).permutation(count)
+    val_indices = set(order[:val_count].tolist())
+    train = [s for n, s in enumerate(scenes) if n not in val_indices]
+    val = [s for n, s in enumerate(scenes) if n in val_indices]
+    return train, val
+
+
+def prepare_grids(scenes: list[Scene], workers: int = 0, progress: bool = True) -> int:
+    """Fuse and cache every grid not cached yet; returns how many were built.
+
+    With ``workers`` > 0 the fusion runs in that many spawned processes (Open3D and torch
+    do not like being forked mid-run).
+    """
+    sources = [scene.source for scene in scenes]
+    bar = tqdm(total=len(sources), desc="grids", unit="scene", disable=not progress, leave=False)
+    built = 0
+    if workers > 0 and len(sources) > 1:
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+            for was_built in pool.map(ensure_cached, sources, chunksize=8):
+                built += was_built
+                bar.update()
+    else:
+        for source in sources:
+            built += ensure_cached(source)
+            bar.update()
+    bar.close()
+    return built
+
+
+@dataclass
+class Sample:
+    grid: torch.Tensor
+    labels: LabelSet
+    voxel_size: float
+
+
+class SceneDataset(Dataset[Sample]):
+    """Scenes as (grid, labels) samples; with ``augment``, each draw is turned and shifted
+    by a random draw fixed by (seed, epoch, index), so runs and resumes repeat exactly."""
+
+    def __init__(self, scenes: list[Scene], augment: bool, seed: int) -> None:
+        self.scenes = scenes
+        self.augment = augment
+        self.seed = seed
+        self.epoch = 0
+
+    def __len__(self) -> int:
+        return len(self.scenes)
+
+    def __getitem__(self, index: int) -> Sample:
+        scene = self.scenes[index]
+        grid, labels = torch.from_numpy(scene.source.load()), scene.labels
+        if self.augment:
+            rng = np.random.default_rng([self.seed, self.epoch, index])
+            grid, labels = random_augment(grid, labels, rng)
+        return Sample(grid, labels, scene.voxel_size)
+
+
+@dataclass
+class Batch:
+    """Scenes stacked for one forward pass and their labels flattened.
+
+    grids (B, 1, N, N, N); per label: scene (L,) index into the batch, voxel (L,) flat index
+    into N³, quaternion (L, 4), width (L,) voxels, label (L,), voxel_size (L,) metres.
+    """
+
+    grids: torch.Tensor
+    scene: torch.Tensor
+    voxel: torch.Tensor
+    quaternion: torch.Tensor
+    width: torch.Tensor
+    label: torch.Tensor
+    voxel_size: torch.Tensor
+
+    def __len__(self) -> int:
+        """Number of labels."""
+        return int(self.scene.shape[0])
+
+    def to(self, device: torch.device) -> Batch:
+        return Batch(
+            *(getattr(self, name).to(device, non_blocking=True) for name in self.__dataclass_fields__)
+        )
+
+
+def collate(samples: list[Sample]) -> Batch:
+    """Stack grids and concatenate labels with the index tensors the loss gathers with."""
+    n = samples[0].grid.shape[0]
+    grids = torch.stack([s.grid for s in samples])[:, None]
+    scene = torch.cat([torch.full((len(s.labels),), b, dtype=torch.long) for b, s in enumerate(samples)])
+    voxel = torch.cat([s.labels.voxel for s in samples])
+    flat = (voxel[:, 0] * n + voxel[:, 1]) * n + voxel[:, 2]
+    return Batch(
+        grids=grids.contiguous(),
+        scene=scene,
+        voxel=flat,
+        quaternion=torch.cat([s.labels.quaternion for s in samples]),
+        width=torch.cat([s.labels.width for s in samples]),
+        label=torch.cat([s.labels.label for s in samples]),
+        voxel_size=torch.cat(
+            [torch.full((len(s.labels),), s.voxel_size, dtype=torch.float32) for s in samples]
+        ),
+    )
+
+
+def make_loader(
+    dataset: SceneDataset, batch_scenes: int, shuffle: bool, epoch: int, workers: int = 0
+) -> DataLoader:
+    """Batches of ``batch_scenes`` scenes; the order is fixed by (seed, epoch)."""
+    dataset.epoch = epoch
+    order = list(range(len(dataset)))
+    if shuffle:
+        order = np.random.default_rng([dataset.seed, epoch]).permutation(len(dataset)).tolist()
+    return DataLoader(
+        dataset,
+        batch_size=batch_scenes,
+        sampler=order,
+        collate_fn=collate,
+        num_workers=workers,
+        pin_memory=torch.cuda.is_available(),
+    )

@@ -1,0 +1,59 @@
+"""VGN's loss (DESIGN §4), read only at labelled voxels.
+
+Per label: BCE(q̂, y) + y · (min(1 - |q̂·q|, 1 - |q̂·q_π|) + 0.01 · (ŵ - w)²), with q_π the
+same grasp turned by π about its approach axis and widths in voxels; the batch loss is the
+mean over labels. Unlabelled voxels never enter it, so they get no gradient.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from service.training.dataset import Batch
+from service.training.quaternions import flipped
+
+#: Weight of the width term (VGN's).
+WIDTH_WEIGHT = 0.01
+
+
+@dataclass
+class Predictions:
+    """Network output at the labelled voxels: quality (L,), quaternion (L, 4), width (L,)."""
+
+    quality: torch.Tensor
+    quaternion: torch.Tensor
+    width: torch.Tensor
+
+
+def gather(output: tuple[torch.Tensor, torch.Tensor, torch.Tensor], batch: Batch) -> Predictions:
+    """Pick the network's (quality (B,1,N,N,N), rotation (B,4,...), width (B,1,...)) at the
+    batch's labelled voxels."""
+    quality, rotation, width = (t.flatten(2) for t in output)
+    return Predictions(
+        quality=quality[batch.scene, 0, batch.voxel],
+        quaternion=rotation[batch.scene, :, batch.voxel],
+        width=width[batch.scene, 0, batch.voxel],
+    )
+
+
+def rotation_loss(predicted: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """(L,) min(1 - |p·q|, 1 - |p·q_π|): zero for either of the two equivalent grasps."""
+    direct = 1.0 - (predicted * target).sum(-1).abs()
+    turned = 1.0 - (predicted * flipped(target)).sum(-1).abs()
+    return torch.minimum(direct, turned)
+
+
+def per_label_loss(predictions: Predictions, batch: Batch) -> torch.Tensor:
+    """(L,) VGN loss of each label; only positives add the rotation and width terms."""
+    quality = F.binary_cross_entropy(predictions.quality, batch.label, reduction="none")
+    rotation = rotation_loss(predictions.quaternion, batch.quaternion)
+    width = WIDTH_WEIGHT * (predictions.width - batch.width).square()
+    return quality + batch.label * (rotation + width)
+
+
+def vgn_loss(predictions: Predictions, batch: Batch) -> torch.Tensor:
+    """Mean loss over the batch's labelled voxels."""
+    return per_label_loss(predictions, batch).mean()

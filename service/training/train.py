@@ -1,0 +1,288 @@
+"""The training loop: data → epochs of Adam on VGN's loss → checkpoint, weights and card.
+
+After every epoch the full training state is checkpointed, so an interrupted run resumes
+(``resume=True``) at the next epoch with the same data order and augmentations.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+from tqdm import tqdm
+
+from service.planner import resolve_device
+from service.training import report
+from service.training.augment import MAX_Z_SHIFT
+from service.training.card import build_card, card_path, write_card
+from service.training.checkpoint import (
+    TrainingState,
+    capture_rng,
+    checkpoint_path,
+    load_state,
+    restore_rng,
+    save_state,
+)
+from service.training.dataset import (
+    DatasetSummary,
+    Scene,
+    SceneDataset,
+    load_scenes,
+    make_loader,
+    prepare_grids,
+    split_scenes,
+)
+from service.training.grids import MAX_DEPTH, RESOLUTION
+from service.training.loss import gather, per_label_loss
+from service.training.metrics import MetricAccumulator
+from service.vgn.checkpoint import save_vgn
+from service.vgn.network import VGN
+
+
+class TrainingError(Exception):
+    """A run cannot start or continue (no data, an existing checkpoint, a bad setting)."""
+
+
+@dataclass
+class TrainConfig:
+    """One training run. Paths: ``data`` raw VGN datasets, ``out`` the ``.safetensors``
+    weights to write (checkpoint and card go beside it)."""
+
+    data: list[Path]
+    out: Path
+    epochs: int = 10
+    lr: float = 3e-4
+    batch_scenes: int = 4
+    val_fraction: float = 0.1
+    seed: int = 0
+    device: str = "auto"
+    cache: Path | None = None
+    workers: int = 0
+    resolution: int = RESOLUTION
+    max_depth: float = MAX_DEPTH
+    augment: bool = True
+    resume: bool = False
+    fresh: bool = False
+    progress: bool = True
+
+    def check(self) -> None:
+        if self.out.suffix != ".safetensors":
+            raise TrainingError(f"--out must end in .safetensors, got {self.out}")
+        if self.epochs < 1 or self.batch_scenes < 1 or self.workers < 0 or self.lr <= 0:
+            raise TrainingError("epochs and batch size must be >= 1, workers >= 0, lr > 0")
+        if self.resolution % 8:
+            raise TrainingError(f"resolution must be a multiple of 8 (VGN's encoder), got {self.resolution}")
+        if self.resume and self.fresh:
+            raise TrainingError("give --resume or --fresh, not both")
+
+
+@dataclass
+class TrainResult:
+    """What a run produced: files, per-epoch history and the data it saw."""
+
+    weights: Path
+    card: Path
+    checkpoint: Path
+    history: list[dict[str, Any]]
+    best: dict[str, Any] | None
+    datasets: list[DatasetSummary]
+    train_scenes: int
+    val_scenes: int
+    grids_built: int
+    device: str
+    resumed_from: int = 0
+
+
+def train(
+    config: TrainConfig, command: list[str] | None = None, log: Callable[[str], None] = tqdm.write
+) -> TrainResult:
+    """Run (or continue) training as ``config`` says and write weights, card and checkpoint."""
+    config.check()
+    device = resolve_device(config.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise TrainingError("--device cuda was asked for but torch sees no CUDA GPU")
+    torch.manual_seed(config.seed)
+
+    scenes, summaries = load_scenes(config.data, config.resolution, config.max_depth, config.cache)
+    if not scenes:
+        raise TrainingError(f"no labelled scenes inside the grid in {', '.join(map(str, config.data))}")
+    train_scenes, val_scenes = split_scenes(scenes, config.val_fraction, config.seed)
+    for summary in summaries:
+        log(
+            f"data {summary.path}: {summary.scenes} scenes, {summary.grasps} grasps "
+            f"({summary.positives} positive, {summary.negatives} negative, "
+            f"{summary.outside_grid} outside the grid dropped)"
+        )
+    built = prepare_grids(scenes, config.workers, config.progress)
+    log(
+        f"grids: {built} fused, {len(scenes) - built} from cache; split {len(train_scenes)} train / "
+        f"{len(val_scenes)} val scenes; device {device}"
+    )
+
+    network = VGN().to(device)
+    optimizer = torch.optim.Adam(network.parameters(), lr=config.lr)
+    state = _start(config, network, optimizer, _identity(config, val_scenes), log)
+    resumed_from = state.epoch
+
+    train_data = SceneDataset(train_scenes, augment=config.augment, seed=config.seed)
+    val_data = SceneDataset(val_scenes, augment=False, seed=config.seed)
+    if state.epoch < config.epochs:
+        log(report.header(validation=bool(val_scenes)))
+    for epoch in range(state.epoch, config.epochs):
+        started = time.perf_counter()
+        loader = make_loader(train_data, config.batch_scenes, True, epoch, config.workers)
+        train_metrics = _run_epoch(
+            network, loader, device, optimizer, f"epoch {epoch + 1}/{config.epochs}", config.progress
+        )
+        val_metrics = None
+        if len(val_data):
+            loader = make_loader(val_data, config.batch_scenes, False, epoch, config.workers)
+            val_metrics = _run_epoch(network, loader, device, None, "  val", config.progress)
+        entry = {
+            "epoch": epoch + 1,
+            "train": train_metrics,
+            "val": val_metrics,
+            "seconds": round(time.perf_counter() - started, 3),
+            "train_scenes": len(train_data),
+        }
+        state.history.append(entry)
+        state.epoch = epoch + 1
+        state.model, state.optimizer, state.rng = network.state_dict(), optimizer.state_dict(), capture_rng()
+        save_state(state, checkpoint_path(config.out))
+        log(report.row(entry))
+
+    save_vgn(network, config.out)
+    best = best_epoch(state.history)
+    card = build_card(
+        weights=config.out,
+        datasets=[s.as_dict() for s in summaries],
+        training=_training_settings(config, device, train_scenes, val_scenes),
+        history=state.history,
+        best=best,
+        command=command if command is not None else sys.argv,
+    )
+    write_card(card, card_path(config.out))
+    return TrainResult(
+        weights=config.out,
+        card=card_path(config.out),
+        checkpoint=checkpoint_path(config.out),
+        history=state.history,
+        best=best,
+        datasets=summaries,
+        train_scenes=len(train_scenes),
+        val_scenes=len(val_scenes),
+        grids_built=built,
+        device=str(device),
+        resumed_from=resumed_from,
+    )
+
+
+def _start(
+    config: TrainConfig,
+    network: VGN,
+    optimizer: torch.optim.Optimizer,
+    identity: dict[str, Any],
+    log: Callable[[str], None],
+) -> TrainingState:
+    """A fresh state, or the checkpoint's when resuming (its weights, optimizer, rng loaded)."""
+    path = checkpoint_path(config.out)
+    if config.resume:
+        if not path.is_file():
+            raise TrainingError(f"--resume: no checkpoint at {path}")
+        state = load_state(path, identity)
+        network.load_state_dict(state.model, strict=True)
+        optimizer.load_state_dict(state.optimizer)
+        for group in optimizer.param_groups:
+            group["lr"] = config.lr
+        restore_rng(state.rng)
+        log(f"resumed {path} after epoch {state.epoch}; training to epoch {config.epochs}")
+        return state
+    if path.exists() and not config.fresh:
+        raise TrainingError(
+            f"a checkpoint of an earlier run exists at {path}: pass --resume to continue it "
+            "or --fresh to start over (it will be replaced)"
+        )
+    return TrainingState(epoch=0, model={}, optimizer={}, history=[], identity=identity)
+
+
+def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
+    """What a resumed run must share with the checkpoint's: same data, split and grids."""
+    split = hashlib.sha256("\n".join(sorted(s.key for s in val_scenes)).encode()).hexdigest()[:16]
+    return {
+        "data": [str(Path(p).resolve()) for p in config.data],
+        "seed": config.seed,
+        "resolution": config.resolution,
+        "max_depth": config.max_depth,
+        "val_fraction": config.val_fraction,
+        "val_split": split,
+    }
+
+
+def _run_epoch(
+    network: VGN,
+    loader: torch.utils.data.DataLoader,
+    device: torch.device,
+    optimizer: torch.optim.Optimizer | None,
+    description: str,
+    progress: bool,
+) -> dict[str, float | None]:
+    """One pass over ``loader``: trains when given an optimizer, else only evaluates."""
+    network.train(optimizer is not None)
+    metrics = MetricAccumulator()
+    bar = tqdm(loader, desc=description, unit="batch", disable=not progress, leave=False)
+    with torch.set_grad_enabled(optimizer is not None):
+        for batch in bar:
+            if not len(batch):  # every label was shifted out of the grid
+                continue
+            batch = batch.to(device)
+            predictions = gather(network(batch.grids), batch)
+            losses = per_label_loss(predictions, batch)
+            loss = losses.mean()
+            if not torch.isfinite(loss):
+                raise TrainingError(f"the loss became {loss.item()} ({description}); lower --lr?")
+            if optimizer is not None:
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+            metrics.update(predictions, batch, losses.detach())
+            bar.set_postfix(loss=f"{loss.item():.4f}")
+    return metrics.result()
+
+
+def best_epoch(history: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The entry with the lowest validation loss (training loss when there is no validation)."""
+
+    def score(entry: dict[str, Any]) -> float:
+        metrics = entry.get("val") or entry["train"]
+        return metrics["loss"] if metrics.get("loss") is not None else float("inf")
+
+    return min(history, key=score) if history else None
+
+
+def _training_settings(
+    config: TrainConfig, device: torch.device, train_scenes: list[Scene], val_scenes: list[Scene]
+) -> dict[str, Any]:
+    return {
+        "epochs": config.epochs,
+        "lr": config.lr,
+        "optimizer": "Adam",
+        "batch_scenes": config.batch_scenes,
+        "val_fraction": config.val_fraction,
+        "seed": config.seed,
+        "augment": f"z turns k*90 deg, z shifts U{{-{MAX_Z_SHIFT}..{MAX_Z_SHIFT}}} voxels"
+        if config.augment
+        else None,
+        "resolution": config.resolution,
+        "max_depth": config.max_depth,
+        "device": str(device),
+        "train_scenes": len(train_scenes),
+        "val_scenes": len(val_scenes),
+        "train_labels": sum(len(s.labels) for s in train_scenes),
+        "val_labels": sum(len(s.labels) for s in val_scenes),
+    }
