@@ -75,7 +75,11 @@ class SessionStore:
         now = self._clock()
         workspace = spec.workspace
         volume = SceneVolume(
-            workspace.size, workspace.resolution, workspace.pose.as_matrix(), self._cloud_resolution
+            workspace.size,
+            workspace.resolution,
+            workspace.pose.as_matrix(),
+            self._cloud_resolution,
+            self._cloud_max_pending,
         )
         with self._lock:
             self._drop_expired(now)
