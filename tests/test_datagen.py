@@ -1,0 +1,141 @@
+"""Data generation through a real service: VGN's labelling, the raw layout, resume, cleaning."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from client.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews, clean_and_balance
+from sim_worker.datagen import grasp_frame, middle_of_widest_run
+from tests.scenes import circle_views
+
+
+@pytest.mark.parametrize(
+    "successes, expected",
+    [
+        ([0, 0, 0, 0, 0, 0], None),
+        ([1, 0, 0, 0, 0, 0], 0),
+        ([0, 1, 1, 1, 0, 0], 2),
+        ([1, 1, 0, 1, 1, 1], 4),  # widest run wins
+        ([1, 1, 0, 0, 1, 1], 0),  # ties: the first
+        ([1, 1, 1, 1, 1, 1], 2),
+    ],
+)
+def test_middle_of_widest_run(successes, expected):
+    assert middle_of_widest_run(np.asarray(successes, dtype=bool)) == expected
+
+
+@pytest.mark.parametrize("normal", [(0, 0, 1), (1, 0, 0), (0.3, -0.4, 0.8), (0, 0, -1)])
+def test_grasp_frame_approaches_against_the_normal(normal):
+    normal = np.asarray(normal, float) / np.linalg.norm(normal)
+    matrix = grasp_frame(normal).as_matrix()
+    np.testing.assert_allclose(matrix[:, 2], -normal, atol=1e-9)
+    assert np.linalg.det(matrix) == pytest.approx(1.0)
+
+
+def make_dataset(root: Path, labels: list[tuple[str, list[float], int]]) -> RawDataset:
+    dataset = RawDataset(root, DatasetSetup())
+    poses = np.stack(circle_views(2))
+    for sid in sorted({sid for sid, _, _ in labels}):
+        rows = [[0, 0, 0, 1, *position, 0.05, label] for s, position, label in labels if s == sid]
+        dataset.add_scene(sid, SceneViews(np.full((2, 480, 640), 0.5, np.float32), poses), np.asarray(rows))
+    return dataset
+
+
+def test_raw_layout_round_trip(tmp_path: Path):
+    dataset = make_dataset(
+        tmp_path, [("a", [0.1, 0.1, 0.1], 1), ("a", [0.2, 0.1, 0.1], 0), ("b", [0.1, 0.2, 0.1], 0)]
+    )
+    reopened = RawDataset(tmp_path)
+    assert reopened.setup == DatasetSetup() and reopened.scene_ids() == ["a", "b"]
+    ids, grasps = reopened.grasps()
+    assert ids == ["a", "a", "b"] and grasps.shape == (3, 9) and grasps[:, 8].tolist() == [1, 0, 0]
+    views = reopened.read_scene("a")
+    np.testing.assert_allclose(views.camera_poses, np.stack(circle_views(2)), atol=1e-12)
+    assert (tmp_path / "setup.json").exists() and not list(tmp_path.rglob(".*.tmp"))
+    with pytest.raises(ValueError, match="another setup"):
+        RawDataset(tmp_path, DatasetSetup(size=0.4))
+    # A writer killed mid-line leaves a torn row: readers skip it.
+    with (tmp_path / "grasps.csv").open("a") as stream:
+        stream.write("c,0.1,0.2")
+    assert RawDataset(tmp_path).scene_ids() == ["a", "b"]
+
+
+def test_clean_and_balance(tmp_path: Path):
+    labels = [("a", [0.1, 0.1, 0.1], 1), ("a", [0.15, 0.1, 0.1], 0), ("a", [0.2, 0.1, 0.1], 0),
+              ("b", [0.1, 0.2, 0.1], 0), ("b", [0.01, 0.2, 0.1], 1), ("b", [0.1, 0.2, 0.2], 1)]  # fmt: skip
+    make_dataset(tmp_path / "raw", labels)
+    kept = clean_and_balance(tmp_path / "raw", tmp_path / "clean", seed=0)
+    _, grasps = RawDataset(tmp_path / "clean").grasps()
+    assert kept == len(grasps) == 4  # the (0.01, ...) positive lies outside: 2 positives + 2 negatives
+    assert grasps[:, 8].sum() == 2
+    assert np.all((grasps[:, 4:7] >= VALID_LOWER) & (grasps[:, 4:7] <= VALID_UPPER))
+    assert len(RawDataset(tmp_path / "raw").grasps()[0]) == 6, "the raw folder is kept as it was"
+
+
+def generate(server_url: str, out: Path, scenes: int, workers: int = 1) -> subprocess.CompletedProcess:
+    command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", server_url, "--scene", "pile",
+               "--objects", "blocks", "--scenes", str(scenes), "--workers", str(workers), "--points", "8",
+               "--renderer", "tiny", "--out", str(out)]  # fmt: skip
+    return subprocess.run(command, capture_output=True, text=True, timeout=600)
+
+
+def test_generate_through_a_real_service_and_resume(server, tmp_path: Path):
+    out = tmp_path / "data"
+    first = generate(server.url, out, scenes=2, workers=2)
+    assert first.returncode == 0, first.stderr
+    assert "grasps/s per worker" in first.stdout
+    dataset = RawDataset(out)
+    ids, grasps = dataset.grasps()
+    assert sorted(set(ids)) == ["s0-0000000", "s0-0000001"] and len(grasps) == 16
+    assert np.allclose(np.linalg.norm(grasps[:, :4], axis=1), 1.0, atol=1e-5)
+    assert set(grasps[:, 8]) <= {0.0, 1.0}
+    positives = grasps[grasps[:, 8] == 1]
+    assert np.all((positives[:, 7] > 0) & (positives[:, 7] <= 0.08)), "positive widths fit the gripper"
+    for sid in set(ids):
+        views = dataset.read_scene(sid)
+        assert 1 <= len(views.depth) <= 6 and views.depth.shape[1:] == (480, 640)
+        assert views.depth.max() > 0
+    rows_before = (out / "grasps.csv").read_text()
+    again = generate(server.url, out, scenes=3)
+    assert again.returncode == 0, again.stderr
+    assert "2 of 3 scenes already" in again.stderr
+    text = (out / "grasps.csv").read_text()
+    assert text.startswith(rows_before), "earlier rows are untouched"
+    ids, _ = RawDataset(out).grasps()
+    assert sorted(set(ids)) == ["s0-0000000", "s0-0000001", "s0-0000002"] and len(ids) == 24, "no duplicates"
+
+
+def test_labels_of_a_generated_scene_replay(server, tmp_path: Path):
+    """A stored positive label is a grasp that succeeds when replayed in the same scene."""
+    from client.http import VGNClient
+    from sim_worker.datagen import DataGenConfig, SceneLabeller
+    from sim_worker.grasping import execute_grasp
+
+    with VGNClient(server.url) as vgn:
+        labeller = SceneLabeller(vgn, DataGenConfig(scene="pile", objects=("blocks",), points_per_scene=12,
+                                                    renderer="tiny"))  # fmt: skip
+        try:
+            labelled = None
+            for index in range(6):
+                labelled = labeller.label_scene(index)
+                if labelled is not None and labelled[1][:, 8].any():
+                    break
+            assert labelled is not None and labelled[1][:, 8].any(), "some positive among 6 small scenes"
+            row = labelled[1][labelled[1][:, 8] == 1][0]
+            labeller.world.clear_objects()
+            labeller.label_scene(index)  # rebuild the same scene (same seed, same index)
+            pose = np.eye(4)
+            pose[:3, :3] = Rotation.from_quat(row[:4]).as_matrix()
+            pose[:3, 3] = row[4:7]
+            trial = execute_grasp(
+                labeller.world, labeller.gripper, pose, allow_contact=False, remove_grasped=False
+            )
+            assert trial.label == 1
+        finally:
+            labeller.close()
