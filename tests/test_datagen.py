@@ -48,7 +48,7 @@ def make_dataset(root: Path, labels: list[tuple[str, list[float], int]]) -> RawD
 
 
 def test_raw_layout_round_trip(tmp_path: Path):
-    dataset = make_dataset(
+    make_dataset(
         tmp_path, [("a", [0.1, 0.1, 0.1], 1), ("a", [0.2, 0.1, 0.1], 0), ("b", [0.1, 0.2, 0.1], 0)]
     )
     reopened = RawDataset(tmp_path)
