@@ -1,6 +1,6 @@
-"""``vgn-client clear-scene --sim``: wire the CLI to the simulator and a (possibly embedded) service.
+"""``vgn-client clear-scene --sim``: the simulator against a (possibly embedded) service.
 
-The simulator is imported only here, so the client package itself never needs pybullet.
+Imported only when the command runs, so the client package itself never needs pybullet.
 """
 
 from __future__ import annotations
@@ -12,22 +12,12 @@ from pathlib import Path
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient, VGNError
+from sim_worker.clutter import ClutterConfig, ClutterRemoval
+from sim_worker.metrics import summary_table
+from sim_worker.results import ResultsFolder
 
 
-def clear_scene(args: argparse.Namespace) -> int:
-    if not args.sim:
-        print("error: only simulated runs exist so far: add --sim", file=sys.stderr)
-        return 2
-    try:
-        from sim_worker.clutter import ClutterConfig
-        from sim_worker.metrics import summary_table
-        from sim_worker.results import ResultsFolder
-    except ImportError as error:
-        print(
-            f"error: the simulator needs the sim extra ({error}): pip install 'vgn-service[all]'",
-            file=sys.stderr,
-        )
-        return 2
+def run(args: argparse.Namespace) -> int:
     config = ClutterConfig(
         scene=args.scene,
         objects=args.objects,
@@ -76,8 +66,6 @@ def clear_scene(args: argparse.Namespace) -> int:
 
 
 def _run(config, vgn: VGNClient, results, image_dir) -> dict:
-    from sim_worker.clutter import ClutterRemoval
-
     remaining = config.rounds - len(results.finished_rounds())
     if remaining < config.rounds:
         print(

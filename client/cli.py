@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import sys
@@ -73,13 +74,7 @@ def _add_generate_data(commands) -> None:
         "the fused cloud with normals is read back, and 120 grasp points are labelled by trying 6 yaws each in "
         "PyBullet. Output: DIR/setup.json, DIR/grasps.csv, DIR/scenes/<id>.npz. A rerun resumes.",
     )
-    gen.add_argument("--sim", action="store_true", help="run in simulation (the only mode)")
-    gen.add_argument(
-        "--url",
-        default=os.environ.get("VGN_URL"),
-        help="service address; when absent an embedded service is started",
-    )
-    gen.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
+    _add_sim_options(gen)
     gen.add_argument("--scene", choices=["pile", "packed"], default="pile")
     gen.add_argument(
         "--objects",
@@ -92,7 +87,6 @@ def _add_generate_data(commands) -> None:
     gen.add_argument("--seed", type=int, default=0, help="scene i uses (seed, i); ids are s<seed>-<i>")
     gen.add_argument("--points", type=int, default=120, help="grasp points per scene (default %(default)s)")
     gen.add_argument("--noise", action="store_true", help="depth noise on the rendered views")
-    gen.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
 
     clean = commands.add_parser(
         "clean-data",
@@ -112,13 +106,7 @@ def _add_clear_scene(commands) -> None:
         "and repeats until the table is clear, no grasp is found, or two grasps in a row fail. "
         "Without --url an embedded service is started on a free port and stopped at the end.",
     )
-    clear.add_argument("--sim", action="store_true", help="run in simulation (the only mode so far)")
-    clear.add_argument(
-        "--url",
-        default=os.environ.get("VGN_URL"),
-        help="service address (env VGN_URL); when absent, an embedded service is started",
-    )
-    clear.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
+    _add_sim_options(clear)
     clear.add_argument("--model", help="weights for the embedded service (sets its VGN_MODEL)")
     clear.add_argument("--scene", choices=["blocks", "pile", "packed"], default="blocks")
     clear.add_argument(
@@ -144,7 +132,6 @@ def _add_clear_scene(commands) -> None:
         help="execute the best grasp, or a random one above threshold (as the paper)",
     )
     clear.add_argument("--noise", action="store_true", help="add depth noise (robustness runs)")
-    clear.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     clear.add_argument(
         "--results",
         help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",
@@ -204,18 +191,41 @@ def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
     return 0
 
 
+SIM_COMMANDS = {"clear-scene": "client.clear_scene", "generate-data": "client.generate_data"}
+
+
+def _run_sim_command(args: argparse.Namespace) -> int:
+    """Simulator commands import pybullet, so they load only when they run."""
+    if not args.sim:
+        print(f"error: {args.command} runs in simulation only so far: add --sim", file=sys.stderr)
+        return 2
+    try:
+        module = importlib.import_module(SIM_COMMANDS[args.command])
+    except ImportError as error:
+        print(
+            f"error: the simulator needs the sim extra ({error}): pip install 'vgn-service[all]'",
+            file=sys.stderr,
+        )
+        return 2
+    return module.run(args)
+
+
+def _add_sim_options(parser: argparse.ArgumentParser) -> None:
+    """Options every simulator command shares."""
+    parser.add_argument("--sim", action="store_true", help="run in simulation (the only mode so far)")
+    parser.add_argument("--url", default=os.environ.get("VGN_URL"),
+                        help="service address (env VGN_URL); when absent, an embedded service is started")  # fmt: skip
+    parser.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
+    parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto",
+                        help="PyBullet renderer: EGL when it loads, else TinyRenderer (same depth)")  # fmt: skip
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.command == "serve":
         return _serve(args)
-    if args.command == "clear-scene":
-        from client.clear_scene import clear_scene
-
-        return clear_scene(args)
-    if args.command == "generate-data":
-        from client.generate_data import generate_data
-
-        return generate_data(args)
+    if args.command in SIM_COMMANDS:
+        return _run_sim_command(args)
     if args.command == "clean-data":
         from client.dataset import clean_and_balance
 

@@ -1,4 +1,7 @@
-"""``vgn-client generate-data --sim``: K simulator processes labelling scenes through one service."""
+"""``vgn-client generate-data --sim``: K simulator processes labelling scenes through one service.
+
+Imported only when the command runs, so the client package itself never needs pybullet.
+"""
 
 from __future__ import annotations
 
@@ -10,12 +13,13 @@ import sys
 import time
 from pathlib import Path
 
+from client.dataset import RawDataset
 from client.embedded import EmbeddedService
+from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
 
 
 def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:
     """One simulator process: its own PyBullet world and client, its share of the scenes."""
-    from client.dataset import RawDataset
     from client.http import VGNClient
     from sim_worker.datagen import generate
 
@@ -24,19 +28,7 @@ def _worker(url: str, api_key: str | None, out: str, config, indices: list[int],
                  report=lambda sid, grasps, seconds: reports.put((sid, grasps, seconds)))  # fmt: skip
 
 
-def generate_data(args: argparse.Namespace) -> int:
-    if not args.sim:
-        print("error: only simulated data generation exists: add --sim", file=sys.stderr)
-        return 2
-    try:
-        from client.dataset import RawDataset
-        from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
-    except ImportError as error:
-        print(
-            f"error: the simulator needs the sim extra ({error}): pip install 'vgn-service[all]'",
-            file=sys.stderr,
-        )
-        return 2
+def run(args: argparse.Namespace) -> int:
     if args.workers < 1 or args.scenes < 0:
         print("error: --workers must be >= 1 and --scenes >= 0", file=sys.stderr)
         return 2
