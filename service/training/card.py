@@ -49,7 +49,7 @@ def build_card(
     training: dict[str, Any],
     history: list[dict[str, Any]],
     best: dict[str, Any] | None,
-    command: list[str],
+    command: str,
 ) -> dict[str, Any]:
     """The card's content; ``weights`` must already be written (its content id is recorded)."""
     return {
@@ -69,6 +69,7 @@ def build_card(
         "history": history,
         "code_version": code_version(),
         "command": command,
+        "working_directory": os.getcwd(),
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
     }
 

@@ -86,7 +86,12 @@ def load_state(path: Path, identity: dict[str, Any]) -> TrainingState:
         if stored.get(key) != identity.get(key)
     ]
     if differences:
-        raise CheckpointMismatch(f"{path} was made by another run:\n  " + "\n  ".join(differences))
+        raise CheckpointMismatch(
+            f"{path} was made by another run:\n  "
+            + "\n  ".join(differences)
+            + "\nresuming needs the same datasets (unchanged), seed, resolution and split; "
+            "start over with --fresh or write to another --out"
+        )
     return TrainingState(
         epoch=int(payload["epoch"]),
         model=payload["model"],

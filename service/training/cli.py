@@ -62,18 +62,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     data.add_argument(
         "--val-fraction",
+        metavar="F",
         type=float,
         default=0.1,
         help="share of scenes held out for validation (default 0.1; 0 = none)",
     )
     data.add_argument(
         "--resolution",
+        metavar="N",
         type=int,
         default=RESOLUTION,
         help=f"grid voxels a side (default {RESOLUTION}, VGN's; a multiple of 8)",
     )
     data.add_argument(
         "--max-depth",
+        metavar="M",
         type=float,
         default=MAX_DEPTH,
         help=f"ignore depth readings beyond this many metres (default {MAX_DEPTH}, as the service)",
@@ -93,15 +96,22 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="weights to write; the card and checkpoint go beside it",
     )
-    run.add_argument("--epochs", type=int, default=10, help="total epochs of the run (default 10, VGN's)")
-    run.add_argument("--lr", type=float, default=3e-4, help="Adam learning rate (default 3e-4, VGN's)")
+    run.add_argument(
+        "--epochs", metavar="N", type=int, default=10, help="total epochs of the run (default 10, VGN's)"
+    )
+    run.add_argument(
+        "--lr", metavar="LR", type=float, default=3e-4, help="Adam learning rate (default 3e-4, VGN's)"
+    )
     run.add_argument(
         "--batch-scenes",
+        metavar="B",
         type=int,
         default=4,
         help="scenes per optimiser step; each brings all its labels (default 4)",
     )
-    run.add_argument("--seed", type=int, default=0, help="fixes split, order and augmentations (default 0)")
+    run.add_argument(
+        "--seed", metavar="S", type=int, default=0, help="fixes split, order and augmentations (default 0)"
+    )
     run.add_argument(
         "--resume", action="store_true", help="continue the run in OUT's checkpoint up to --epochs in total"
     )
@@ -116,11 +126,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     machine.add_argument(
         "--workers",
+        metavar="W",
         type=int,
         default=0,
         help="processes fusing grids and loading batches (default 0 = in this process)",
     )
-    machine.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    machine.add_argument(
+        "--threads",
+        metavar="T",
+        type=int,
+        default=None,
+        help="torch CPU threads (default: torch's; 1 is often faster on a busy or 2-core CPU)",
+    )
     machine.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
     return parser
 
@@ -173,15 +190,14 @@ def main(argv: list[str] | None = None) -> int:
     config = config_from_args(args)
     command = ["vgn-train", *(sys.argv[1:] if argv is None else argv)]
     try:
-        result = train(config, command=[shlex.join(command)])
+        result = train(config, command=shlex.join(command))
     except (TrainingError, CheckpointMismatch, FileNotFoundError, ValueError) as error:
         print(f"vgn-train: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(
-            f"\nvgn-train: interrupted; continue with --resume (checkpoint: {checkpoint_path(config.out)})",
-            file=sys.stderr,
-        )
+        path = checkpoint_path(config.out)
+        hint = f"continue with --resume (checkpoint: {path})" if path.exists() else "no epoch had finished"
+        print(f"\nvgn-train: interrupted; {hint}", file=sys.stderr)
         return 130
     print(summary(result))
     return 0

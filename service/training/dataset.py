@@ -7,6 +7,7 @@ labels concatenated with a scene index, which the loss uses to gather prediction
 
 from __future__ import annotations
 
+import hashlib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from multiprocessing import get_context
@@ -50,6 +51,7 @@ class DatasetSummary:
     positives: int
     negatives: int
     outside_grid: int
+    scenes_without_labels: int
     missing_scene_files: int
     cache: str
 
@@ -73,17 +75,17 @@ def load_scenes(
         key = cache_key(setup, resolution, max_depth)
         grids_dir = cache_dir(dataset.root, cache_root, resolution, key)
         ids, rows = dataset.grasps()
-        summary = DatasetSummary(str(dataset.root.resolve()), setup.size, 0, 0, 0, 0, 0, 0, str(grids_dir))
+        summary = DatasetSummary(str(dataset.root.resolve()), setup.size, 0, 0, 0, 0, 0, 0, 0, str(grids_dir))
         for scene_id, scene_rows in _group_rows(ids, rows):
-            scene_path = dataset.scenes_dir / f"{scene_id}.npz"
-            if not scene_path.is_file():
+            if not (dataset.scenes_dir / f"{scene_id}.npz").is_file():
                 summary.missing_scene_files += 1
                 continue
             labels, outside = LabelSet.from_rows(scene_rows, voxel_size, resolution)
             summary.outside_grid += outside
             if not len(labels):
+                summary.scenes_without_labels += 1
                 continue
-            source = GridSource(scene_path, grids_dir / f"{scene_id}.npz", setup, resolution, max_depth, key)
+            source = GridSource(dataset, scene_id, grids_dir / f"{scene_id}.npz", resolution, max_depth, key)
             scenes.append(Scene(index, scene_id, source, labels, voxel_size))
             positives = int(labels.label.sum())
             summary.scenes += 1
@@ -107,20 +109,25 @@ def _group_rows(ids: list[str], rows: np.ndarray) -> list[tuple[str, np.ndarray]
 def split_scenes(scenes: list[Scene], val_fraction: float, seed: int) -> tuple[list[Scene], list[Scene]]:
     """Train and validation scenes, split by scene (never by grasp) and fixed by ``seed``.
 
-    At least one scene goes to validation when ``val_fraction`` > 0 and there are two or
-    more scenes; at least one always stays for training.
+    A scene is held out when a hash of (seed, its key) falls below ``val_fraction``, so the
+    choice does not depend on the other scenes: a dataset that grows keeps its old split.
+    At least one scene is held out when ``val_fraction`` > 0 and there are two or more.
     """
     if not 0.0 <= val_fraction < 1.0:
         raise ValueError(f"val_fraction must be in [0, 1), got {val_fraction}")
-    count = len(scenes)
-    val_count = 0
-    if val_fraction > 0 and count >= 2:
-        val_count = min(count - 1, max(1, round(val_fraction * count)))
-    order = np.random.default_rng(seed).permutation(count)
-    val_indices = set(order[:val_count].tolist())
-    train = [s for n, s in enumerate(scenes) if n not in val_indices]
-    val = [s for n, s in enumerate(scenes) if n in val_indices]
+    draws = [_uniform_hash(seed, scene.key) for scene in scenes]
+    held_out = [draw < val_fraction for draw in draws]
+    if val_fraction > 0 and len(scenes) >= 2 and not any(held_out):
+        held_out[int(np.argmin(draws))] = True
+    train = [s for s, out in zip(scenes, held_out, strict=True) if not out]
+    val = [s for s, out in zip(scenes, held_out, strict=True) if out]
     return train, val
+
+
+def _uniform_hash(seed: int, key: str) -> float:
+    """A number in [0, 1) fixed by (seed, key), uniform over keys."""
+    digest = hashlib.sha256(f"{seed}:{key}".encode()).digest()
+    return int.from_bytes(digest[:8], "big") / 2**64
 
 
 def prepare_grids(scenes: list[Scene], workers: int = 0, progress: bool = True) -> int:
@@ -193,6 +200,10 @@ class Batch:
     def __len__(self) -> int:
         """Number of labels."""
         return int(self.scene.shape[0])
+
+    def pin_memory(self) -> Batch:
+        """Page-locked copies, so ``to(cuda)`` can overlap with compute (DataLoader calls this)."""
+        return Batch(*(getattr(self, name).pin_memory() for name in self.__dataclass_fields__))
 
     def to(self, device: torch.device) -> Batch:
         return Batch(

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from client.dataset import DatasetSetup, SceneViews
+from client.dataset import DatasetSetup, RawDataset, SceneViews
 from service.tsdf import TSDFVolume
 
 #: VGN's grid resolution (DESIGN §2); the network needs a multiple of 8.
@@ -58,21 +58,29 @@ def cache_dir(data_dir: Path, cache_root: Path | None, resolution: int, key: str
     leaf = f"grids-{resolution}-{key}"
     if cache_root is None:
         return data_dir / ".cache" / leaf
-    resolved = str(data_dir.resolve())
-    tag = hashlib.sha256(resolved.encode()).hexdigest()[:8]
-    return cache_root / f"{data_dir.resolve().name}-{tag}" / leaf
+    resolved = data_dir.resolve()
+    tag = hashlib.sha256(str(resolved).encode()).hexdigest()[:8]
+    return cache_root.resolve() / f"{resolved.name}-{tag}" / leaf
 
 
 @dataclass(frozen=True)
 class GridSource:
-    """Everything needed to produce one scene's grid, picklable for worker processes."""
+    """Everything needed to produce one scene's grid, picklable for worker processes.
 
-    scene_path: Path
+    A cache file records the key and the size of the scene file it came from, so a scene
+    rewritten under the same id is fused again.
+    """
+
+    dataset: RawDataset
+    scene_id: str
     cache_path: Path
-    setup: DatasetSetup
     resolution: int
     max_depth: float
     key: str
+
+    @property
+    def scene_path(self) -> Path:
+        return self.dataset.scenes_dir / f"{self.scene_id}.npz"
 
     def load(self) -> np.ndarray:
         """The cached grid, or a freshly fused one (then cached)."""
@@ -85,19 +93,30 @@ class GridSource:
         """The cached grid if its file is readable and matches this source; else ``None``."""
         try:
             with np.load(self.cache_path) as data:
-                grid, key, scene_bytes = data["grid"], str(data["key"]), int(data["scene_bytes"])
+                if not self._matches(data):
+                    return None
+                grid = data["grid"]
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             return None
         n = self.resolution
-        if key != self.key or scene_bytes != self._scene_bytes() or grid.shape != (n, n, n):
-            return None
-        return grid.astype(np.float32, copy=False)
+        return grid.astype(np.float32, copy=False) if grid.shape == (n, n, n) else None
+
+    def is_cached(self) -> bool:
+        """A cheap check that the cache file exists and matches, without decompressing the grid
+        (a damaged grid member is still caught, and rebuilt, by ``load``)."""
+        try:
+            with np.load(self.cache_path) as data:
+                return self._matches(data)
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+            return False
+
+    def _matches(self, data) -> bool:
+        return str(data["key"]) == self.key and int(data["scene_bytes"]) == self._scene_bytes()
 
     def build(self) -> np.ndarray:
         """Fuse the scene's depth images and write the cache file atomically."""
-        with np.load(self.scene_path) as data:
-            views = SceneViews.from_extrinsics(data["depth_imgs"], data["extrinsics"])
-        grid = fuse_grid(views, self.setup, self.resolution, self.max_depth)
+        views = self.dataset.read_scene(self.scene_id)
+        grid = fuse_grid(views, self.dataset.setup, self.resolution, self.max_depth)
         self.cache_path.parent.mkdir(parents=True, exist_ok=True)
         temporary = self.cache_path.with_name(
             f".{self.cache_path.name}.{os.getpid()}.{threading.get_ident()}.tmp"
@@ -115,7 +134,7 @@ class GridSource:
 
 def ensure_cached(source: GridSource) -> bool:
     """Make sure ``source`` has a valid cache file; True when it had to be built."""
-    if source.cached() is not None:
+    if source.is_cached():
         return False
     source.build()
     return True

@@ -64,7 +64,7 @@ class MetricAccumulator:
             width_m = (predictions.width[actual] - batch.width[actual]).abs() * batch.voxel_size[actual]
             self.width_error_sum += float(width_m.sum()) * 1e3
 
-    def result(self) -> dict[str, float | None]:
+    def result(self) -> dict[str, float | int | None]:
         tp, fp, fn = self.true_positives, self.false_positives, self.false_negatives
         return {
             "loss": _ratio(self.loss_sum, self.labels),
@@ -73,8 +73,8 @@ class MetricAccumulator:
             "recall": _ratio(tp, tp + fn),
             "rotation_error_deg": _ratio(self.rotation_error_sum, self.positives),
             "width_error_mm": _ratio(self.width_error_sum, self.positives),
-            "labels": float(self.labels),
-            "positives": float(self.positives),
+            "labels": self.labels,
+            "positives": self.positives,
         }
 
 

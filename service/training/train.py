@@ -7,6 +7,8 @@ After every epoch the full training state is checkpointed, so an interrupted run
 from __future__ import annotations
 
 import hashlib
+import os
+import shlex
 import sys
 import time
 from collections.abc import Callable
@@ -40,7 +42,7 @@ from service.training.dataset import (
 )
 from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.loss import gather, per_label_loss
-from service.training.metrics import MetricAccumulator
+from service.training.metrics import THRESHOLD, MetricAccumulator
 from service.vgn.checkpoint import save_vgn
 from service.vgn.network import VGN
 
@@ -100,10 +102,11 @@ class TrainResult:
 
 
 def train(
-    config: TrainConfig, command: list[str] | None = None, log: Callable[[str], None] = tqdm.write
+    config: TrainConfig, command: str | None = None, log: Callable[[str], None] = tqdm.write
 ) -> TrainResult:
     """Run (or continue) training as ``config`` says and write weights, card and checkpoint."""
     config.check()
+    _check_checkpoint(config)
     device = resolve_device(config.device)
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainingError("--device cuda was asked for but torch sees no CUDA GPU")
@@ -117,7 +120,8 @@ def train(
         log(
             f"data {summary.path}: {summary.scenes} scenes, {summary.grasps} grasps "
             f"({summary.positives} positive, {summary.negatives} negative, "
-            f"{summary.outside_grid} outside the grid dropped)"
+            f"{summary.outside_grid} outside the grid dropped); skipped {summary.scenes_without_labels} "
+            f"scenes without labels in the grid, {summary.missing_scene_files} without a scene file"
         )
     built = prepare_grids(scenes, config.workers, config.progress)
     log(
@@ -125,7 +129,7 @@ def train(
         f"{len(val_scenes)} val scenes; device {device}"
     )
 
-    network = VGN().to(device)
+    network = VGN().to(device, memory_format=_memory_format(device))
     optimizer = torch.optim.Adam(network.parameters(), lr=config.lr)
     state = _start(config, network, optimizer, _identity(config, val_scenes), log)
     resumed_from = state.epoch
@@ -158,6 +162,7 @@ def train(
         log(report.row(entry))
 
     save_vgn(network, config.out)
+    _readable_by_others(config.out)
     best = best_epoch(state.history)
     card = build_card(
         weights=config.out,
@@ -165,7 +170,7 @@ def train(
         training=_training_settings(config, device, train_scenes, val_scenes),
         history=state.history,
         best=best,
-        command=command if command is not None else sys.argv,
+        command=command if command is not None else shlex.join(sys.argv),
     )
     write_card(card, card_path(config.out))
     return TrainResult(
@@ -193,8 +198,6 @@ def _start(
     """A fresh state, or the checkpoint's when resuming (its weights, optimizer, rng loaded)."""
     path = checkpoint_path(config.out)
     if config.resume:
-        if not path.is_file():
-            raise TrainingError(f"--resume: no checkpoint at {path}")
         state = load_state(path, identity)
         network.load_state_dict(state.model, strict=True)
         optimizer.load_state_dict(state.optimizer)
@@ -203,12 +206,27 @@ def _start(
         restore_rng(state.rng)
         log(f"resumed {path} after epoch {state.epoch}; training to epoch {config.epochs}")
         return state
-    if path.exists() and not config.fresh:
+    return TrainingState(epoch=0, model={}, optimizer={}, history=[], identity=identity)
+
+
+def _readable_by_others(path: Path) -> None:
+    """Give the weights the mode of an ordinary new file (the safetensors writer leaves 0600),
+    so a service running as another user can load them."""
+    umask = os.umask(0)
+    os.umask(umask)
+    path.chmod(0o666 & ~umask)
+
+
+def _check_checkpoint(config: TrainConfig) -> None:
+    """Refuse, before any slow work, to resume nothing or to overwrite an earlier run unasked."""
+    path = checkpoint_path(config.out)
+    if config.resume and not path.is_file():
+        raise TrainingError(f"--resume: no checkpoint at {path}")
+    if not config.resume and path.exists() and not config.fresh:
         raise TrainingError(
             f"a checkpoint of an earlier run exists at {path}: pass --resume to continue it "
             "or --fresh to start over (it will be replaced)"
         )
-    return TrainingState(epoch=0, model={}, optimizer={}, history=[], identity=identity)
 
 
 def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
@@ -231,7 +249,7 @@ def _run_epoch(
     optimizer: torch.optim.Optimizer | None,
     description: str,
     progress: bool,
-) -> dict[str, float | None]:
+) -> dict[str, float | int | None]:
     """One pass over ``loader``: trains when given an optimizer, else only evaluates."""
     network.train(optimizer is not None)
     metrics = MetricAccumulator()
@@ -241,7 +259,8 @@ def _run_epoch(
             if not len(batch):  # every label was shifted out of the grid
                 continue
             batch = batch.to(device)
-            predictions = gather(network(batch.grids), batch)
+            grids = batch.grids.to(memory_format=_memory_format(device))
+            predictions = gather(network(grids), batch)
             losses = per_label_loss(predictions, batch)
             loss = losses.mean()
             if not torch.isfinite(loss):
@@ -253,6 +272,11 @@ def _run_epoch(
             metrics.update(predictions, batch, losses.detach())
             bar.set_postfix(loss=f"{loss.item():.4f}")
     return metrics.result()
+
+
+def _memory_format(device: torch.device) -> torch.memory_format:
+    """oneDNN's preferred 3D layout: about halves a VGN training step on a CPU."""
+    return torch.channels_last_3d if device.type == "cpu" else torch.contiguous_format
 
 
 def best_epoch(history: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -281,6 +305,7 @@ def _training_settings(
         "resolution": config.resolution,
         "max_depth": config.max_depth,
         "device": str(device),
+        "metrics_threshold": THRESHOLD,
         "train_scenes": len(train_scenes),
         "val_scenes": len(val_scenes),
         "train_labels": sum(len(s.labels) for s in train_scenes),

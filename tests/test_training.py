@@ -1,0 +1,390 @@
+"""Training pipeline: loss, augmentation, grids, cache, and a short train → resume → serve run.
+
+The datasets are tiny synthetic raw datasets: analytic box scenes seen by small cameras,
+with a handful of hand-placed labels, written through ``client.dataset.RawDataset``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial.transform import Rotation
+
+from client.dataset import DatasetSetup, RawDataset, SceneViews
+from client.schemas import Intrinsics, SessionCreate
+from service.core import PlanningService
+from service.planner import GraspPlanner
+from service.training.augment import random_augment, rotate_z, shift_z
+from service.training.checkpoint import checkpoint_path
+from service.training.cli import main
+from service.training.dataset import Batch, Sample, collate, load_scenes, prepare_grids, split_scenes
+from service.training.grids import cache_key
+from service.training.labels import LabelSet
+from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
+from service.training.metrics import MetricAccumulator, rotation_error_deg
+from service.training.quaternions import flipped, multiply
+from service.vgn.checkpoint import load_vgn
+from tests.scenes import TABLE_Z, BoxScene, circle_views
+
+N = 40
+VOXEL = 0.3 / N
+#: A small camera keeps the analytic ray casting and the fusion fast.
+SMALL = Intrinsics(width=160, height=120, fx=135.0, fy=135.0, cx=79.5, cy=59.5)
+TOP_DOWN = Rotation.from_euler("x", np.pi)  # grasp z (approach) pointing down
+
+
+def scene_grasps(box: BoxScene, rng: np.random.Generator) -> np.ndarray:
+    """Rows (qx, qy, qz, qw, x, y, z, width, label): top-down positives over the box, negatives
+    in the table and in empty air, and one grasp outside the grid (dropped on load)."""
+    centre = (np.asarray(box.lower) + np.asarray(box.upper)) / 2
+    rows = []
+    for _ in range(3):
+        yaw = Rotation.from_euler("z", rng.uniform(0, np.pi))
+        position = np.r_[centre[:2] + rng.uniform(-0.01, 0.01, 2), box.upper[2] + 0.01]
+        rows.append([*(yaw * TOP_DOWN).as_quat(), *position, 0.06, 1])
+    for _ in range(3):
+        position = np.r_[rng.uniform(0.02, 0.28, 2), rng.choice([TABLE_Z - 0.02, 0.27])]
+        rows.append([*Rotation.random(random_state=rng.integers(1 << 31)).as_quat(), *position, 0.0, 0])
+    rows.append([0, 0, 0, 1, 0.35, 0.1, 0.1, 0.04, 1])  # outside the 0.3 m cube
+    rows = np.asarray(rows, dtype=np.float64)
+    rows[:, 4:7] = np.round(rows[:, 4:7] / VOXEL) * VOXEL  # VGN stores grasps at voxel positions
+    return rows
+
+
+def make_dataset(root: Path, scenes: int, views: int = 2, seed: int = 0) -> RawDataset:
+    """A raw dataset of ``scenes`` boxes of random size and place, each seen from ``views`` cameras."""
+    dataset = RawDataset(root, DatasetSetup(size=0.3, intrinsics=SMALL))
+    rng = np.random.default_rng(seed)
+    for n in range(scenes):
+        corner = rng.uniform(0.08, 0.16, 2)
+        extent = rng.uniform(0.04, 0.08, 3)
+        box = BoxScene(lower=(*corner, TABLE_Z), upper=(*(corner + extent[:2]), TABLE_Z + extent[2]))
+        poses = circle_views(views, tilt_deg=float(rng.uniform(15, 40)))
+        depth = np.stack([box.depth(pose, SMALL) for pose in poses])
+        dataset.add_scene(f"scene{n:03d}", SceneViews(depth, np.stack(poses)), scene_grasps(box, rng))
+    return dataset
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory: pytest.TempPathFactory) -> RawDataset:
+    return make_dataset(tmp_path_factory.mktemp("raw") / "boxes", scenes=4)
+
+
+def labels_of(voxels, quaternions, label=1.0) -> LabelSet:
+    voxels = torch.as_tensor(voxels, dtype=torch.long).reshape(-1, 3)
+    count = len(voxels)
+    return LabelSet(
+        voxel=voxels,
+        quaternion=torch.as_tensor(np.asarray(quaternions), dtype=torch.float32).reshape(count, 4),
+        width=torch.full((count,), 5.0),
+        label=torch.full((count,), label),
+    )
+
+
+# Quaternions and the loss -------------------------------------------------------------------
+
+
+def test_quaternion_product_and_flip_match_scipy():
+    a, b = Rotation.random(5, random_state=1), Rotation.random(5, random_state=2)
+    product = multiply(torch.tensor(a.as_quat()), torch.tensor(b.as_quat())).numpy()
+    assert np.allclose(np.abs(np.sum(product * (a * b).as_quat(), axis=1)), 1.0)
+    # q_π = q ⊗ [0, 0, 1, 0] is q turned by π about its own (grasp) z axis.
+    turned = (a * Rotation.from_euler("z", np.pi)).as_quat()
+    assert np.allclose(np.abs(np.sum(flipped(torch.tensor(a.as_quat())).numpy() * turned, axis=1)), 1.0)
+    assert np.allclose(
+        multiply(torch.tensor(a.as_quat()), torch.tensor([0.0, 0, 1, 0])).numpy(),
+        flipped(torch.tensor(a.as_quat())).numpy(),
+    )
+
+
+def test_rotation_loss_is_zero_for_both_symmetric_targets_only():
+    target = torch.tensor(Rotation.random(8, random_state=3).as_quat(), dtype=torch.float32)
+    assert torch.allclose(rotation_loss(target, target), torch.zeros(8), atol=1e-6)
+    assert torch.allclose(rotation_loss(flipped(target), target), torch.zeros(8), atol=1e-6)
+    assert torch.allclose(rotation_loss(-flipped(target), target), torch.zeros(8), atol=1e-6)
+    other = Rotation.from_quat(target.numpy()) * Rotation.from_euler("z", np.pi / 2)
+    assert torch.all(rotation_loss(torch.tensor(other.as_quat(), dtype=torch.float32), target) > 0.2)
+    tilted = Rotation.from_quat(target.numpy()) * Rotation.from_euler("x", 0.3)
+    assert torch.all(rotation_loss(torch.tensor(tilted.as_quat(), dtype=torch.float32), target) > 0.01)
+
+
+def random_output(batch: int = 2, requires_grad: bool = False):
+    torch.manual_seed(0)
+    quality = torch.rand(batch, 1, N, N, N) * 0.98 + 0.01
+    rotation = torch.nn.functional.normalize(torch.randn(batch, 4, N, N, N), dim=1)
+    width = torch.rand(batch, 1, N, N, N) * 8
+    return tuple(t.requires_grad_(requires_grad) for t in (quality, rotation, width))
+
+
+def small_batch() -> Batch:
+    quaternions = Rotation.random(3, random_state=4).as_quat()
+    a = Sample(torch.zeros(N, N, N), labels_of([[1, 2, 3], [39, 0, 20]], quaternions[:2]), VOXEL)
+    b = Sample(torch.zeros(N, N, N), labels_of([[5, 6, 7]], quaternions[2:], label=0.0), VOXEL)
+    return collate([a, b])
+
+
+def test_gather_reads_output_at_label_voxels_of_their_scene():
+    batch = small_batch()
+    quality, rotation, width = random_output()
+    predictions = gather((quality, rotation, width), batch)
+    expected = [(0, 1, 2, 3), (0, 39, 0, 20), (1, 5, 6, 7)]
+    for n, (b, i, j, k) in enumerate(expected):
+        assert predictions.quality[n] == quality[b, 0, i, j, k]
+        assert torch.equal(predictions.quaternion[n], rotation[b, :, i, j, k])
+        assert predictions.width[n] == width[b, 0, i, j, k]
+
+
+def test_loss_only_reads_labelled_voxels():
+    batch = small_batch()
+    output = random_output(requires_grad=True)
+    loss = vgn_loss(gather(output, batch), batch)
+    loss.backward()
+    labelled = torch.zeros(2, N, N, N, dtype=torch.bool)
+    labelled[0, 1, 2, 3] = labelled[0, 39, 0, 20] = labelled[1, 5, 6, 7] = True
+    for tensor in output:
+        gradient = tensor.grad.abs().sum(dim=1)
+        assert torch.all(gradient[~labelled] == 0), "no gradient may reach unlabelled voxels"
+    assert torch.all(output[0].grad[:, 0][labelled] != 0)
+    # Changing the output anywhere else leaves the loss as it was.
+    changed = tuple(t.detach().clone() for t in output)
+    changed[0][:, 0][~labelled] = 0.5
+    changed[2][:, 0][~labelled] = 100.0
+    assert vgn_loss(gather(changed, batch), batch) == pytest.approx(loss.item(), rel=1e-6)
+
+
+def test_loss_terms():
+    """A perfect prediction costs only the BCE; width and rotation count for positives only."""
+    batch = small_batch()
+    perfect = Predictions(batch.label * 0.999 + 0.0005, flipped(batch.quaternion), batch.width.clone())
+    assert torch.all(per_label_loss(perfect, batch) < 2e-3)
+    wide = Predictions(perfect.quality, perfect.quaternion, batch.width + 10.0)
+    losses = per_label_loss(wide, batch) - per_label_loss(perfect, batch)
+    assert torch.allclose(losses, batch.label * 0.01 * 100.0, atol=1e-4)
+
+
+# Augmentation -------------------------------------------------------------------------------
+
+
+def marked(labels: LabelSet) -> torch.Tensor:
+    """A grid holding a distinct marker at each label's voxel, and another one voxel along
+    each grasp's approach axis (the approaches below are axis-aligned)."""
+    grid = torch.zeros(N, N, N)
+    for n, (voxel, quaternion) in enumerate(zip(labels.voxel, labels.quaternion, strict=True)):
+        grid[tuple(voxel)] = 1.0 + n
+        grid[tuple(voxel + approach_step(quaternion))] = 100.0 + n
+    return grid
+
+
+def approach_step(quaternion: torch.Tensor) -> torch.Tensor:
+    approach = Rotation.from_quat(quaternion.numpy()).apply([0.0, 0.0, 1.0])
+    step = np.rint(approach).astype(np.int64)
+    assert np.allclose(approach, step, atol=1e-5)
+    return torch.from_numpy(step)
+
+
+def assert_aligned(grid: torch.Tensor, labels: LabelSet) -> None:
+    for n in range(len(labels)):
+        voxel = labels.voxel[n]
+        assert grid[tuple(voxel)] == 1.0 + n, "the label's voxel must carry its grid feature along"
+        assert grid[tuple(voxel + approach_step(labels.quaternion[n]))] == 100.0 + n, (
+            "the grasp orientation must turn with the grid"
+        )
+
+
+# Side grasps approaching along +x, -y and +y, and a top-down one, at asymmetric voxels.
+AXIS_GRASPS = labels_of(
+    [[5, 9, 12], [30, 17, 8], [12, 33, 25], [21, 4, 30]],
+    [
+        Rotation.from_euler("y", np.pi / 2).as_quat(),  # z → +x
+        Rotation.from_euler("x", np.pi / 2).as_quat(),  # z → -y
+        Rotation.from_euler("zx", [0.7, -np.pi / 2]).as_quat(),  # z → +y, yawed
+        TOP_DOWN.as_quat(),  # z → -z
+    ],
+)
+
+
+@pytest.mark.parametrize("quarter_turns", [0, 1, 2, 3])
+def test_rotation_moves_grid_labels_and_orientations_together(quarter_turns: int):
+    grid = marked(AXIS_GRASPS)
+    rotated, labels = rotate_z(grid, AXIS_GRASPS, quarter_turns)
+    assert_aligned(rotated, labels)
+    turn = Rotation.from_euler("z", quarter_turns * np.pi / 2)
+    expected = (turn * Rotation.from_quat(AXIS_GRASPS.quaternion.numpy())).as_quat()
+    assert np.allclose(np.abs(np.sum(labels.quaternion.numpy() * expected, axis=1)), 1.0, atol=1e-6)
+    assert torch.equal(labels.width, AXIS_GRASPS.width) and torch.equal(labels.label, AXIS_GRASPS.label)
+
+
+def test_quarter_turn_is_positive_about_z():
+    """One quarter turn maps +x to +y: voxel (i, j) goes to (N-1-j, i) about the centre."""
+    labels = labels_of([[30, 20, 5]], [Rotation.identity().as_quat()])
+    _, turned = rotate_z(torch.zeros(N, N, N), labels, 1)
+    assert turned.voxel.tolist() == [[N - 1 - 20, 30, 5]]
+
+
+@pytest.mark.parametrize("shift", [-4, -1, 3, 4])
+def test_z_shift_moves_grid_and_labels_and_drops_leavers(shift: int):
+    grid = marked(AXIS_GRASPS)
+    shifted, labels = shift_z(grid, AXIS_GRASPS, shift)
+    assert_aligned(shifted, labels)
+    assert torch.equal(labels.voxel[:, 2], AXIS_GRASPS.voxel[:, 2] + shift)
+    edge = labels_of([[3, 3, 0], [3, 3, N - 1]], [Rotation.identity().as_quat()] * 2)
+    _, kept = shift_z(torch.zeros(N, N, N), edge, shift)
+    assert len(kept) == 1 and 0 <= int(kept.voxel[0, 2]) < N
+    assert torch.all(shifted[:, :, :shift] == 0) if shift > 0 else torch.all(shifted[:, :, N + shift :] == 0)
+
+
+def test_random_augmentations_keep_alignment():
+    grid = marked(AXIS_GRASPS)
+    rng = np.random.default_rng(7)
+    for _ in range(12):
+        augmented, labels = random_augment(grid, AXIS_GRASPS, rng, max_shift=3)
+        assert len(labels) == len(AXIS_GRASPS)
+        assert_aligned(augmented, labels)
+
+
+# Data: labels, grids, cache, split ----------------------------------------------------------
+
+
+def test_labels_map_to_voxels_and_drop_outside():
+    rows = np.array(
+        [
+            [0, 0, 0, 1, 3 * VOXEL, 7 * VOXEL + 1e-6, 39 * VOXEL, 0.03, 1],
+            [0, 0, 0, 2, 0.0, 0.0, 0.0, 0.0, 0],  # unnormalised quaternion
+            [0, 0, 0, 1, 40 * VOXEL, 0.1, 0.1, 0.03, 1],  # index 40: outside
+            [0, 0, 0, 1, -0.01, 0.1, 0.1, 0.03, 0],
+        ]
+    )
+    labels, dropped = LabelSet.from_rows(rows, VOXEL, N)
+    assert dropped == 2 and labels.voxel.tolist() == [[3, 7, 39], [0, 0, 0]]
+    assert labels.width[0] == pytest.approx(4.0) and labels.label.tolist() == [1.0, 0.0]
+    assert torch.allclose(labels.quaternion[1], torch.tensor([0.0, 0, 0, 1]))
+
+
+def test_training_grids_equal_service_grids(dataset: RawDataset, core: PlanningService, tmp_path: Path):
+    scenes, _ = load_scenes([dataset.root], N, 2.0, cache_root=tmp_path)
+    for scene in scenes[:2]:
+        views = dataset.read_scene(scene.scene_id)
+        session = core.create_session(SessionCreate()).session_id
+        for depth, pose in zip(views.depth, views.camera_poses, strict=True):
+            core.add_frame(session, depth, pose, SMALL, 2.0)
+        assert np.array_equal(scene.source.load(), core.grid(session))
+        assert np.array_equal(scene.source.load(), scene.source.cached())
+
+
+def test_grid_cache_is_used_and_corrupt_files_rebuilt(dataset: RawDataset, tmp_path: Path):
+    scenes, summaries = load_scenes([dataset.root], N, 2.0, cache_root=tmp_path / "cache")
+    assert prepare_grids(scenes, progress=False) == len(scenes)
+    files = sorted(Path(summaries[0].cache).glob("*.npz"))
+    assert [f.stem for f in files] == [s.scene_id for s in scenes]
+    assert prepare_grids(scenes, progress=False) == 0, "the second load reads the cache"
+    original = scenes[0].source.load()
+    scenes[0].source.cache_path.write_bytes(b"not an npz")
+    assert scenes[0].source.cached() is None
+    assert prepare_grids(scenes, progress=False) == 1
+    assert np.array_equal(scenes[0].source.cached(), original)
+    assert not list(Path(summaries[0].cache).glob(".*.tmp")), "no temp files left behind"
+    # Another setup or resolution gets another key, so it never reads these files.
+    setup = dataset.setup
+    assert cache_key(setup, 40, 2.0) != cache_key(setup, 48, 2.0)
+    assert cache_key(setup, 40, 2.0) != cache_key(DatasetSetup(size=0.4, intrinsics=SMALL), 40, 2.0)
+
+
+def test_split_is_by_scene_and_fixed_by_seed(dataset: RawDataset, tmp_path: Path):
+    scenes, summaries = load_scenes([dataset.root], N, 2.0, cache_root=tmp_path)
+    assert summaries[0].scenes == 4 and summaries[0].outside_grid == 4
+    assert summaries[0].grasps == 4 * 6 and summaries[0].positives == 4 * 3
+    train, val = split_scenes(scenes, 0.1, seed=1)
+    assert len(val) >= 1 and len(train) + len(val) == 4
+    assert {s.key for s in train}.isdisjoint({s.key for s in val})
+    assert [s.key for s in split_scenes(scenes, 0.1, seed=1)[1]] == [s.key for s in val]
+    assert split_scenes(scenes, 0.0, seed=1)[1] == []
+    # Each scene's side depends only on (seed, scene): a grown dataset keeps the old split.
+    more = make_dataset(tmp_path / "more", scenes=40)
+    grown, _ = load_scenes([more.root], N, 2.0, cache_root=tmp_path)
+    big_train, big_val = split_scenes(grown, 0.3, seed=2)
+    small_train, small_val = split_scenes(grown[:25], 0.3, seed=2)
+    assert {s.key for s in small_val} <= {s.key for s in big_val}
+    assert 4 <= len(big_val) <= 20, "about 30 % held out"
+
+
+# Metrics ------------------------------------------------------------------------------------
+
+
+def test_metrics_count_at_threshold_and_measure_errors():
+    batch = small_batch()  # labels 1, 1, 0
+    turned = Rotation.from_quat(batch.quaternion.numpy()) * Rotation.from_euler("x", np.radians(10))
+    predictions = Predictions(
+        quality=torch.tensor([0.95, 0.5, 0.92]),
+        quaternion=torch.tensor(turned.as_quat(), dtype=torch.float32),
+        width=batch.width + 2.0,
+    )
+    metrics = MetricAccumulator()
+    metrics.update(predictions, batch, per_label_loss(predictions, batch))
+    result = metrics.result()
+    assert result["accuracy"] == pytest.approx(1 / 3)
+    assert result["precision"] == pytest.approx(0.5) and result["recall"] == pytest.approx(0.5)
+    assert result["rotation_error_deg"] == pytest.approx(10.0, abs=1e-3)
+    assert result["width_error_mm"] == pytest.approx(2 * VOXEL * 1e3)
+    assert float(rotation_error_deg(flipped(batch.quaternion), batch.quaternion).max()) < 0.1
+    assert MetricAccumulator().result()["precision"] is None
+
+
+# The whole run ------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def one_thread():
+    """Torch on one thread: on a shared 2-core box, 2 OpenMP threads slow down ~4x when
+    another process takes a core, and one thread costs little here."""
+    threads = torch.get_num_threads()
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_train_resume_and_serve(dataset: RawDataset, tmp_path: Path, capsys, one_thread):
+    out = tmp_path / "models" / "vgn.safetensors"
+    base = ["--data", str(dataset.root), "--out", str(out), "--cache", str(tmp_path / "cache")]
+    base += [
+        "--batch-scenes",
+        "2",
+        "--val-fraction",
+        "0.25",
+        "--no-progress",
+        "--lr",
+        "1e-3",
+        "--threads",
+        "1",
+    ]
+    assert main([*base, "--epochs", "1"]) == 0
+    card = json.loads(out.with_suffix(".card.json").read_text())
+    training = card["training"]
+    assert out.is_file() and card["epochs"] == 1 and training["train_scenes"] + training["val_scenes"] == 4
+    assert card["datasets"][0]["scenes"] == 4 and card["datasets"][0]["positives"] == 12
+    assert card["command"].startswith("vgn-train --data") and card["code_version"]["package"]
+    first = card["history"][0]
+    assert math.isfinite(first["train"]["loss"]) and math.isfinite(first["val"]["loss"])
+
+    assert main([*base, "--epochs", "2"]) == 2, "an existing checkpoint needs --resume or --fresh"
+    assert "--resume" in capsys.readouterr().err
+
+    assert main([*base, "--epochs", "2", "--resume", "--seed", "5"]) == 2, "another run's checkpoint"
+    assert "seed" in capsys.readouterr().err
+
+    assert main([*base, "--epochs", "2", "--resume"]) == 0
+    state = torch.load(checkpoint_path(out), weights_only=True)
+    assert state["epoch"] == 2 and [e["epoch"] for e in state["history"]] == [1, 2]
+    assert state["history"][0] == first, "resuming keeps the earlier epochs instead of restarting"
+    card = json.loads(out.with_suffix(".card.json").read_text())
+    losses = [e["train"]["loss"] for e in card["history"]]
+    assert card["epochs"] == 2 and all(map(math.isfinite, losses)) and losses[-1] < losses[0]
+    assert card["metrics"]["best"]["epoch"] in (1, 2) and card["metrics"]["final"]["epoch"] == 2
+    assert "best epoch" in capsys.readouterr().out
+
+    load_vgn(out)  # strict
+    planner = GraspPlanner.from_path(out, device="cpu")
+    assert planner.ready and planner.infer(np.zeros((N, N, N), np.float32)).quality.shape == (N, N, N)
