@@ -7,7 +7,6 @@ After every epoch the full training state is checkpointed, so an interrupted run
 from __future__ import annotations
 
 import hashlib
-import os
 import shlex
 import sys
 import time
@@ -162,7 +161,6 @@ def train(
         log(report.row(entry))
 
     save_vgn(network, config.out)
-    _readable_by_others(config.out)
     best = best_epoch(state.history)
     card = build_card(
         weights=config.out,
@@ -207,14 +205,6 @@ def _start(
         log(f"resumed {path} after epoch {state.epoch}; training to epoch {config.epochs}")
         return state
     return TrainingState(epoch=0, model={}, optimizer={}, history=[], identity=identity)
-
-
-def _readable_by_others(path: Path) -> None:
-    """Give the weights the mode of an ordinary new file (the safetensors writer leaves 0600),
-    so a service running as another user can load them."""
-    umask = os.umask(0)
-    os.umask(umask)
-    path.chmod(0o666 & ~umask)
 
 
 def _check_checkpoint(config: TrainConfig) -> None:

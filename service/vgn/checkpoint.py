@@ -4,6 +4,7 @@ arbitrary objects)."""
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 import torch
@@ -59,8 +60,13 @@ def load_vgn(path: Path) -> VGN:
 
 
 def save_vgn(network: VGN, path: Path) -> None:
-    """Write ``network``'s weights as safetensors, atomically (temp file + rename)."""
+    """Write ``network``'s weights as safetensors, atomically (temp file + rename), with the
+    mode of an ordinary new file: the safetensors writer leaves 0600, and a service running
+    as another user must be able to read shipped weights."""
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_name(path.name + ".tmp")
     save_file({k: v.detach().cpu().contiguous() for k, v in network.state_dict().items()}, str(temporary))
+    umask = os.umask(0)
+    os.umask(umask)
+    temporary.chmod(0o666 & ~umask)
     temporary.replace(path)
