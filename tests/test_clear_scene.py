@@ -129,3 +129,14 @@ def test_without_a_model_the_run_explains_itself(tmp_path: Path, monkeypatch):
     run = clear_scene("--rounds", "1", "--results", str(tmp_path / "r"))
     assert run.returncode == 2
     assert "no model is configured" in run.stderr and "--model" in run.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene, extra", [("pile", ["--object-count", "10", "--noise"]),
+                                          ("packed", ["--views", "side", "--selection", "random"])])  # fmt: skip
+def test_longer_runs(server, tmp_path: Path, scene: str, extra: list[str]):
+    results = tmp_path / scene
+    run = clear_scene("--url", server.url, "--scene", scene, "--rounds", "3", "--threshold", "0.5",
+                      "--results", str(results), *extra)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    check_results(results, 3)
