@@ -171,7 +171,7 @@ def test_loss_terms():
 
 
 def marked(labels: LabelSet) -> torch.Tensor:
-    """A grid holding a distinct marker at each label's voxel, and another one voxel along
+    """A grid holding a distinct marker in each label's cell, and another one cell along
     each grasp's approach axis (the approaches below are axis-aligned)."""
     grid = torch.zeros(N, N, N)
     for n, (voxel, quaternion) in enumerate(zip(labels.voxel, labels.quaternion, strict=True)):
@@ -187,11 +187,20 @@ def approach_step(quaternion: torch.Tensor) -> torch.Tensor:
     return torch.from_numpy(step)
 
 
-def assert_aligned(grid: torch.Tensor, labels: LabelSet) -> None:
+def cell_offset(quarter_turns: int) -> torch.Tensor:
+    """Where a label's cell goes relative to the label after a turn: a grid cell describes
+    the space around its centre (i + 0.5) × voxel while the label sits at i × voxel, so the
+    half-voxel offset between them turns too: cell = label + R(½, ½) − ½."""
+    half = Rotation.from_euler("z", quarter_turns * np.pi / 2).apply([0.5, 0.5, 0.5])
+    return torch.from_numpy(np.rint(half - 0.5).astype(np.int64))
+
+
+def assert_aligned(grid: torch.Tensor, labels: LabelSet, quarter_turns: int = 0) -> None:
+    offset = cell_offset(quarter_turns)
     for n in range(len(labels)):
-        voxel = labels.voxel[n]
-        assert grid[tuple(voxel)] == 1.0 + n, "the label's voxel must carry its grid feature along"
-        assert grid[tuple(voxel + approach_step(labels.quaternion[n]))] == 100.0 + n, (
+        cell = labels.voxel[n] + offset
+        assert grid[tuple(cell)] == 1.0 + n, "the label's cell must carry its grid feature along"
+        assert grid[tuple(cell + approach_step(labels.quaternion[n]))] == 100.0 + n, (
             "the grasp orientation must turn with the grid"
         )
 
@@ -212,7 +221,7 @@ AXIS_GRASPS = labels_of(
 def test_rotation_moves_grid_labels_and_orientations_together(quarter_turns: int):
     grid = marked(AXIS_GRASPS)
     rotated, labels = rotate_z(grid, AXIS_GRASPS, quarter_turns)
-    assert_aligned(rotated, labels)
+    assert_aligned(rotated, labels, quarter_turns)
     turn = Rotation.from_euler("z", quarter_turns * np.pi / 2)
     expected = (turn * Rotation.from_quat(AXIS_GRASPS.quaternion.numpy())).as_quat()
     assert np.allclose(np.abs(np.sum(labels.quaternion.numpy() * expected, axis=1)), 1.0, atol=1e-6)
@@ -220,10 +229,27 @@ def test_rotation_moves_grid_labels_and_orientations_together(quarter_turns: int
 
 
 def test_quarter_turn_is_positive_about_z():
-    """One quarter turn maps +x to +y: voxel (i, j) goes to (N-1-j, i) about the centre."""
+    """One quarter turn maps +x to +y: a label at index (i, j) goes to (N-j, i) about the centre."""
     labels = labels_of([[30, 20, 5]], [Rotation.identity().as_quat()])
     _, turned = rotate_z(torch.zeros(N, N, N), labels, 1)
-    assert turned.voxel.tolist() == [[N - 1 - 20, 30, 5]]
+    assert turned.voxel.tolist() == [[N - 20, 30, 5]]
+
+
+@pytest.mark.parametrize("quarter_turns", [1, 2, 3])
+def test_rotated_labels_are_the_physically_rotated_grasps(quarter_turns: int):
+    """Augmented labels equal the grasps of the scene turned about the workspace centre:
+    round(R (p - c) + c) / voxel for positions p = index × voxel (detection's convention);
+    those turned out of the grid are dropped."""
+    voxels = [[5, 9, 12], [30, 17, 8], [12, 33, 25], [0, 4, 30], [39, 0, 2]]
+    labels = labels_of(voxels, [Rotation.identity().as_quat()] * len(voxels))
+    _, turned = rotate_z(torch.zeros(N, N, N), labels, quarter_turns)
+    centre = np.array([N / 2, N / 2, 0.0])
+    physical = (
+        Rotation.from_euler("z", quarter_turns * np.pi / 2).apply(np.asarray(voxels, float) - centre) + centre
+    )
+    expected = np.rint(physical).astype(int)
+    inside = np.all((expected >= 0) & (expected < N), axis=1)
+    assert turned.voxel.tolist() == expected[inside].tolist()
 
 
 @pytest.mark.parametrize("shift", [-4, -1, 3, 4])
@@ -240,11 +266,13 @@ def test_z_shift_moves_grid_and_labels_and_drops_leavers(shift: int):
 
 def test_random_augmentations_keep_alignment():
     grid = marked(AXIS_GRASPS)
-    rng = np.random.default_rng(7)
+    rng, twin = np.random.default_rng(7), np.random.default_rng(7)  # the twin replays the draws
     for _ in range(12):
         augmented, labels = random_augment(grid, AXIS_GRASPS, rng, max_shift=3)
+        quarter_turns = int(twin.integers(4))
+        twin.integers(-3, 4)
         assert len(labels) == len(AXIS_GRASPS)
-        assert_aligned(augmented, labels)
+        assert_aligned(augmented, labels, quarter_turns)
 
 
 # Data: labels, grids, cache, split ----------------------------------------------------------

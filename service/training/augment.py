@@ -1,8 +1,11 @@
 """VGN's augmentations, applied to a grid and its labels together so they stay aligned.
 
-Grids are indexed [x, y, z] (DESIGN §2). A z-rotation by k × 90° is ``torch.rot90`` over the
-x, y axes about the volume centre; it maps voxel (i, j) to (N-1-j, i) per quarter turn, and
-the grasp orientations turn by the same rotation about the workspace z axis (q' = R_z ⊗ q).
+Grids are indexed [x, y, z] (DESIGN §2). A z-rotation by k × 90° about the workspace centre
+is ``torch.rot90`` over the x, y axes: grid *cells* describe the space around their centres
+(i + 0.5) × voxel, so a quarter turn maps cell (i, j) to (N-1-j, i). A grasp label sits at
+i × voxel (its corner), and the same physical turn takes it to index (N-j, i): labels and
+cells differ by one index so that the augmented sample is exactly the rotated scene with its
+rotated grasps. Orientations turn by the same rotation (q' = R_z ⊗ q).
 A z shift moves grid and labels by whole voxels, filling with 0 (unobserved) and dropping
 labels that leave the grid.
 """
@@ -30,10 +33,12 @@ def rotate_z(grid: torch.Tensor, labels: LabelSet, quarter_turns: int) -> tuple[
     rotated = torch.rot90(grid, k, dims=(0, 1))
     i, j, z = labels.voxel.unbind(-1)
     for _ in range(k):
-        i, j = n - 1 - j, i
+        i, j = n - j, i  # the label convention: position = index × voxel (see the module docstring)
     turn = about_z(k * math.pi / 2, labels.quaternion.dtype)
     quaternion = multiply(turn.expand_as(labels.quaternion), labels.quaternion)
-    return rotated, LabelSet(torch.stack([i, j, z], dim=-1), quaternion, labels.width, labels.label)
+    voxel = torch.stack([i, j, z], dim=-1)
+    moved = LabelSet(voxel, quaternion, labels.width, labels.label)
+    return rotated, moved.select(torch.all((voxel[:, :2] >= 0) & (voxel[:, :2] < n), dim=1))
 
 
 def shift_z(grid: torch.Tensor, labels: LabelSet, voxels: int) -> tuple[torch.Tensor, LabelSet]:

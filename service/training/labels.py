@@ -33,8 +33,9 @@ class LabelSet:
         """Labels of grasps.csv rows (qx, qy, qz, qw, x, y, z, width, label; metres, workspace
         frame) and how many were dropped for lying outside the grid.
 
-        A grasp's voxel is round(position / voxel_size): VGN stores each grasp at its voxel
-        index × voxel size, so this recovers the index exactly.
+        A grasp's voxel is round(position / voxel_size), the inverse of detection's
+        position = index × voxel_size (DESIGN §2); generated positions are continuous, so this
+        is the nearest voxel.
         """
         rows = np.asarray(rows, dtype=np.float64).reshape(-1, 9)
         voxel = np.rint(rows[:, 4:7] / voxel_size).astype(np.int64)
