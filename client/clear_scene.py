@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -31,18 +32,17 @@ def run(args: argparse.Namespace) -> int:
         renderer=args.renderer,
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
-    try:
-        results = ResultsFolder(results_dir, config.as_json())
-    except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    results_dir.mkdir(parents=True, exist_ok=True)
     with contextlib.ExitStack() as stack:
         url = args.url
         if url is None:
             print("starting an embedded service ...", file=sys.stderr)
-            url = stack.enter_context(
-                EmbeddedService(model=args.model, log_path=results_dir / "service.log")
-            ).url
+            try:
+                service = EmbeddedService(model=args.model, log_path=results_dir / "service.log")
+                url = stack.enter_context(service).url
+            except (RuntimeError, TimeoutError) as error:
+                print(f"error: {error}", file=sys.stderr)
+                return 2
         vgn = stack.enter_context(VGNClient(url, api_key=args.api_key))
         readiness = vgn.ready()
         if not readiness.ready:
@@ -51,6 +51,13 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
             return 2
+        # The weights are part of the run's identity: a resume with other weights is refused.
+        config = dataclasses.replace(config, model=vgn.model().model_id)
+        try:
+            results = ResultsFolder(results_dir, config.as_json())
+        except ValueError as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         try:
             summary = _run(config, vgn, results, results_dir / "images" if args.save_images else None)
         except VGNError as error:
@@ -58,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
             return 1
     print(
         f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "
-        f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {summary['model']}"
+        f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {config.model}"
     )
     print(summary_table(summary))
     print(f"results: {results_dir}/ (rounds.csv, grasps.csv, summary.json)")
@@ -78,7 +85,6 @@ def _run(config, vgn: VGNClient, results, image_dir) -> dict:
     except ImportError:  # pragma: no cover - tqdm ships with the sim extra
         bar = None
     episode = ClutterRemoval(config, vgn, results, image_dir)
-    model = vgn.model().model_id or "-"
 
     def progress(record) -> None:
         if bar is not None:
@@ -94,4 +100,4 @@ def _run(config, vgn: VGNClient, results, image_dir) -> dict:
         episode.close()
         if bar is not None:
             bar.close()
-    return {**summary, "model": model}
+    return summary

@@ -229,7 +229,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "clean-data":
         from client.dataset import clean_and_balance
 
-        kept = clean_and_balance(Path(args.source), Path(args.destination), seed=args.seed)
+        try:
+            kept = clean_and_balance(Path(args.source), Path(args.destination), seed=args.seed)
+        except (ValueError, FileNotFoundError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
         print(f"wrote {args.destination}: {kept} grasps")
         return 0
     try:

@@ -15,12 +15,12 @@ from __future__ import annotations
 import csv
 import json
 import os
-import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from client.files import atomic_writer, write_atomically
 from client.geometry import invert, matrix_from_pose, pose_from_matrix
 from client.schemas import Intrinsics
 
@@ -87,15 +87,6 @@ def _csv_lines(scene_ids, rows: np.ndarray) -> str:
     )
 
 
-def _write_atomically(path: Path, write) -> None:
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    with temporary.open("wb") as stream:
-        write(stream)
-        stream.flush()
-        os.fsync(stream.fileno())
-    temporary.replace(path)
-
-
 class RawDataset:
     """A raw dataset folder: create or open, add scenes with their labelled grasps, read back.
 
@@ -118,10 +109,10 @@ class RawDataset:
                 raise FileNotFoundError(f"{setup_path} does not exist: not a raw VGN dataset")
             self.scenes_dir.mkdir(parents=True, exist_ok=True)
             self.setup = setup
-            _write_atomically(setup_path, lambda s: s.write(json.dumps(setup.to_json(), indent=2).encode()))
+            write_atomically(setup_path, json.dumps(setup.to_json(), indent=2))
         self.grasps_path = self.root / "grasps.csv"
         if not self.grasps_path.exists():
-            _write_atomically(self.grasps_path, lambda s: s.write((",".join(GRASP_COLUMNS) + "\n").encode()))
+            write_atomically(self.grasps_path, ",".join(GRASP_COLUMNS) + "\n")
 
     def add_scene(self, scene_id: str, views: SceneViews, grasps: np.ndarray) -> None:
         """Store a scene and its grasps: rows (qx, qy, qz, qw, x, y, z, width, label) in the
@@ -129,7 +120,8 @@ class RawDataset:
         if not scene_id.replace("-", "").replace("_", "").isalnum():
             raise ValueError(f"scene id {scene_id!r} must be alphanumeric (with - or _)")
         arrays = {"depth_imgs": views.depth.astype(np.float32), "extrinsics": views.extrinsics()}
-        _write_atomically(self.scenes_dir / f"{scene_id}.npz", lambda s: np.savez_compressed(s, **arrays))
+        with atomic_writer(self.scenes_dir / f"{scene_id}.npz") as stream:
+            np.savez_compressed(stream, **arrays)
         rows = np.asarray(grasps, dtype=np.float64).reshape(-1, 9)
         self._append(_csv_lines([scene_id] * len(rows), rows))
 
@@ -174,8 +166,8 @@ VALID_UPPER = (0.28, 0.28, 0.30)
 
 
 def clean_and_balance(source: Path, destination: Path, seed: int = 0) -> int:
-    """Write a new dataset with the grasps of ``source`` inside the valid region and as many
-    negatives as positives (negatives dropped at random). Scene files are hard-linked (copied
+    """Write a new dataset with the grasps of ``source`` inside the valid region and at most
+    as many negatives as positives (surplus negatives dropped at random). Scene files are hard-linked (copied
     where links are impossible); ``source`` is left unchanged. Returns the grasps kept."""
     src = RawDataset(source)
     if Path(destination).resolve() == Path(source).resolve():

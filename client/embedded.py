@@ -62,9 +62,13 @@ class EmbeddedService:
             "warning",
         ]
         # A file, not a pipe: a pipe nobody reads would block a chatty child.
-        self._log = open(self._log_path, "ab") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
+        self._log = open(self._log_path, "a+b") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
         self._process = subprocess.Popen(command, env=self._env, stdout=self._log, stderr=self._log)
-        self._wait_until_up()
+        try:
+            self._wait_until_up()
+        except BaseException:
+            self.stop()
+            raise
         return self
 
     def _wait_until_up(self) -> None:
@@ -81,7 +85,6 @@ class EmbeddedService:
             except httpx.TransportError:
                 pass
             time.sleep(0.1)
-        self.stop()
         raise TimeoutError(f"the embedded service did not answer within {self._startup_timeout:g} s")
 
     def _log_tail(self, size: int = 4000) -> str:

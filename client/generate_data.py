@@ -49,7 +49,11 @@ def run(args: argparse.Namespace) -> int:
     with contextlib.ExitStack() as stack:
         url = args.url
         if url is None:
-            url = stack.enter_context(EmbeddedService(log_path=out / "service.log")).url
+            try:
+                url = stack.enter_context(EmbeddedService(log_path=out / "service.log")).url
+            except (RuntimeError, TimeoutError) as error:
+                print(f"error: {error}", file=sys.stderr)
+                return 2
         grasps, seconds = _run_workers(url, args, config, todo)
     per_worker = grasps / seconds / args.workers if seconds else 0.0
     print(

@@ -20,6 +20,8 @@ Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 Quaternion = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
 SESSION_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 MAX_IMAGE_SIDE = 8192
+#: Largest image area: every frame is decoded to float32 and buffered, so this bounds memory.
+MAX_IMAGE_PIXELS = 16_000_000
 
 
 class _Model(BaseModel):
@@ -82,6 +84,10 @@ class Intrinsics(_Model):
 
     @model_validator(mode="after")
     def _principal_point_inside(self) -> Intrinsics:
+        if self.width * self.height > MAX_IMAGE_PIXELS:
+            raise ValueError(
+                f"{self.width}x{self.height} exceeds the largest image of {MAX_IMAGE_PIXELS:,} pixels"
+            )
         if not (0 < self.cx < self.width and 0 < self.cy < self.height):
             raise ValueError(
                 f"principal point ({self.cx}, {self.cy}) must lie inside the {self.width}x{self.height} image"

@@ -143,6 +143,7 @@ class PlanningService:
 
     def plan(self, session_id: str, query: GraspQuery) -> GraspResult:
         """Ranked grasps (world frame, best first) on the session's fused volume."""
+        self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
         if not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         with self.sessions.use(session_id) as session:

@@ -94,7 +94,8 @@ class SessionStore:
 
     @contextmanager
     def use(self, session_id: str) -> Iterator[Session]:
-        """Hold a session exclusively: it is neither evicted nor touched by others meanwhile."""
+        """Hold a session exclusively: others wait for it, and neither eviction nor expiry
+        takes it meanwhile (an explicit delete does; the holder finishes on its own copy)."""
         with self._lock:
             session = self._live(session_id, self._clock())
             session.users += 1

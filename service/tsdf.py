@@ -28,6 +28,7 @@ class _FrameBuffer:
     """
 
     def __init__(self, height: int, width: int) -> None:
+        self.shape = (height, width)
         color = o3d.geometry.Image(np.zeros((height, width, 3), dtype=np.uint8))
         depth = o3d.geometry.Image(np.zeros((height, width), dtype=np.float32))
         self.image = o3d.geometry.RGBDImage.create_from_color_and_depth(
@@ -55,7 +56,7 @@ class TSDFVolume:
             sdf_trunc=TRUNCATION_VOXELS * self.voxel_size,
             color_type=o3d.pipelines.integration.TSDFVolumeColorType.NoColor,
         )
-        self._buffers: dict[tuple[int, int], _FrameBuffer] = {}
+        self._buffer: _FrameBuffer | None = None  # one, for the last frame size seen
 
     def integrate(
         self, depth: np.ndarray, intrinsics: Intrinsics, camera_in_workspace: np.ndarray, max_depth: float
@@ -63,9 +64,9 @@ class TSDFVolume:
         """Fuse an (H, W) depth image in metres (0 = no reading) seen from
         ``camera_in_workspace`` (camera → workspace, 4×4, OpenCV optical frame)."""
         extrinsic = invert(camera_in_workspace)  # Open3D wants workspace → camera.
-        shape = (intrinsics.height, intrinsics.width)
-        buffer = self._buffers.get(shape) or self._buffers.setdefault(shape, _FrameBuffer(*shape))
-        self._volume.integrate(buffer.fill(depth, max_depth), _pinhole(intrinsics), extrinsic)
+        if self._buffer is None or self._buffer.shape != depth.shape:
+            self._buffer = _FrameBuffer(*depth.shape)
+        self._volume.integrate(self._buffer.fill(depth, max_depth), _pinhole(intrinsics), extrinsic)
 
     def grid(self) -> np.ndarray:
         """(N, N, N) float32 network input indexed [i, j, k] along the workspace x, y, z axes.

@@ -42,6 +42,7 @@ class ClutterConfig:
     selection: str = "best"  # best | random
     noise: bool = False
     renderer: str = "auto"
+    model: str | None = None  # id of the service's weights, recorded with the results
 
     def as_json(self) -> dict:
         return asdict(self)

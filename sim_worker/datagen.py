@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.dataset import DatasetSetup, RawDataset, SceneViews
+from client.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews
 from client.http import VGNClient
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views
 from sim_worker.grasping import execute_grasp
@@ -22,9 +22,6 @@ from sim_worker.objects import ObjectSet, object_set
 from sim_worker.scenes import generate_scene, poisson_object_count
 from sim_worker.world import WORKSPACE_SIZE, World
 
-#: VGN's region where grasp points are sampled (and later labels are valid), world frame.
-VALID_LOWER = np.array([0.02, 0.02, 0.055])
-VALID_UPPER = np.array([0.28, 0.28, 0.30])
 #: Normals must point at least this much upwards: grasps from below the table are pointless.
 MIN_NORMAL_Z = -0.1
 

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from client.files import write_atomically
+
 #: VGN's global scale for its block set (``{"blocks": 1.67}`` in its simulation).
 BLOCKS_SCALE = 1.67
 #: Gripper limits the object sets are sized for (DESIGN §2: max opening 0.08 m).
@@ -109,14 +111,7 @@ def write_atomic(path: Path, text: str) -> bool:
             return False
     except (OSError, UnicodeDecodeError):
         pass
-    fd, temp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as file:
-            file.write(text)
-        os.replace(temp, path)
-    except BaseException:
-        Path(temp).unlink(missing_ok=True)
-        raise
+    write_atomically(path, text)
     return True
 
 

@@ -15,10 +15,11 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
+
+from client.files import write_atomically
 
 ROUND_COLUMNS = ["round_id", "scene_id", "object_count", "cleared", "attempts", "successes", "seconds"]
 GRASP_COLUMNS = [
@@ -54,15 +55,6 @@ class RoundRecord:
     successes: int = 0
     seconds: float = 0.0
     grasps: list[dict[str, Any]] = field(default_factory=list)
-
-
-def write_atomically(path: Path, text: str) -> None:
-    temporary = path.with_name(f".{path.name}.tmp")
-    with temporary.open("w", newline="") as stream:
-        stream.write(text)
-        stream.flush()
-        os.fsync(stream.fileno())
-    temporary.replace(path)
 
 
 def _csv_text(columns: list[str], rows: list[dict[str, Any]]) -> str:

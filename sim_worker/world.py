@@ -147,11 +147,6 @@ class World:
                 return True
         return False
 
-    def contacts(self, body: int, other: int | None = None) -> list:
-        if other is None:
-            return list(self.p.getContactPoints(bodyA=body))
-        return list(self.p.getContactPoints(bodyA=body, bodyB=other))
-
     def remove_objects_outside(self, lower=(0.0, 0.0, 0.0), upper=(WORKSPACE_SIZE,) * 3) -> list[int]:
         """Remove objects whose centre left the workspace cube (fallen off, flung away)."""
         removed = []

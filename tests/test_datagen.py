@@ -48,9 +48,7 @@ def make_dataset(root: Path, labels: list[tuple[str, list[float], int]]) -> RawD
 
 
 def test_raw_layout_round_trip(tmp_path: Path):
-    make_dataset(
-        tmp_path, [("a", [0.1, 0.1, 0.1], 1), ("a", [0.2, 0.1, 0.1], 0), ("b", [0.1, 0.2, 0.1], 0)]
-    )
+    make_dataset(tmp_path, [("a", [0.1, 0.1, 0.1], 1), ("a", [0.2, 0.1, 0.1], 0), ("b", [0.1, 0.2, 0.1], 0)])
     reopened = RawDataset(tmp_path)
     assert reopened.setup == DatasetSetup() and reopened.scene_ids() == ["a", "b"]
     ids, grasps = reopened.grasps()

@@ -11,6 +11,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from client.files import write_atomically
 from service.vgn.checkpoint import weights_id
 from service.vgn.network import PARAMETER_COUNT
 
@@ -76,6 +77,4 @@ def build_card(
 
 def write_card(card: dict[str, Any], path: Path) -> None:
     """Write the card as strict JSON (no NaN), atomically."""
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    temporary.write_text(json.dumps(card, indent=2, allow_nan=False) + "\n")
-    temporary.replace(path)
+    write_atomically(path, json.dumps(card, indent=2, allow_nan=False) + "\n")

@@ -7,12 +7,13 @@ Written atomically after every epoch (temp file + rename).
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import torch
+
+from client.files import atomic_writer
 
 #: Bump when the layout below changes incompatibly.
 CHECKPOINT_FORMAT = 1
@@ -69,9 +70,8 @@ def save_state(state: TrainingState, path: Path) -> None:
         "identity": state.identity,
         "rng": state.rng,
     }
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    torch.save(payload, temporary)
-    temporary.replace(path)
+    with atomic_writer(path) as stream:
+        torch.save(payload, stream)
 
 
 def load_state(path: Path, identity: dict[str, Any]) -> TrainingState:

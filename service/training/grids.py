@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import threading
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from client.dataset import DatasetSetup, RawDataset, SceneViews
+from client.files import atomic_writer
 from service.tsdf import TSDFVolume
 
 #: VGN's grid resolution (DESIGN §2); the network needs a multiple of 8.
@@ -117,15 +116,10 @@ class GridSource:
         """Fuse the scene's depth images and write the cache file atomically."""
         views = self.dataset.read_scene(self.scene_id)
         grid = fuse_grid(views, self.dataset.setup, self.resolution, self.max_depth)
-        self.cache_path.parent.mkdir(parents=True, exist_ok=True)
-        temporary = self.cache_path.with_name(
-            f".{self.cache_path.name}.{os.getpid()}.{threading.get_ident()}.tmp"
-        )
-        with temporary.open("wb") as stream:
+        with atomic_writer(self.cache_path) as stream:
             np.savez_compressed(
                 stream, grid=grid, key=np.array(self.key), scene_bytes=np.array(self._scene_bytes())
             )
-        temporary.replace(self.cache_path)
         return grid
 
     def _scene_bytes(self) -> int:

@@ -4,12 +4,12 @@ arbitrary objects)."""
 from __future__ import annotations
 
 import hashlib
-import os
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file, save
 
+from client.files import write_atomically
 from service.vgn.network import VGN
 
 STATE_DICT_SUFFIXES = {".pt", ".pth"}
@@ -60,13 +60,7 @@ def load_vgn(path: Path) -> VGN:
 
 
 def save_vgn(network: VGN, path: Path) -> None:
-    """Write ``network``'s weights as safetensors, atomically (temp file + rename), with the
-    mode of an ordinary new file: the safetensors writer leaves 0600, and a service running
-    as another user must be able to read shipped weights."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(path.name + ".tmp")
-    save_file({k: v.detach().cpu().contiguous() for k, v in network.state_dict().items()}, str(temporary))
-    umask = os.umask(0)
-    os.umask(umask)
-    temporary.chmod(0o666 & ~umask)
-    temporary.replace(path)
+    """Write ``network``'s weights as safetensors, atomically, readable by a service running
+    as another user."""
+    tensors = {k: v.detach().cpu().contiguous() for k, v in network.state_dict().items()}
+    write_atomically(path, save(tensors))
