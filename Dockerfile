@@ -1,9 +1,9 @@
 # vgn-service: the grasp-planning HTTP API on port 8000 (CPU build).
 FROM python:3.11-slim
 
-# libusb: imported by open3d; libgomp: OpenMP runtime of open3d and torch.
+# What open3d links against (libusb above all), and libgomp, the OpenMP runtime of open3d and torch.
 RUN apt-get update \
-    && apt-get install -y --no-install-recommends libusb-1.0-0 libgomp1 \
+    && apt-get install -y --no-install-recommends libusb-1.0-0 libgl1 libegl1 libx11-6 libudev1 libidn2-0 libgomp1 \
     && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /app

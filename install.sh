@@ -1,19 +1,29 @@
 #!/usr/bin/env bash
 # Install vgn-service with every extra (service, simulator, dev tools) into the current Python.
-# Open3D needs the system library libusb-1.0; it is installed here when missing (apt-based systems).
+# Open3D needs a few system libraries (libusb-1.0 above all); they are installed here when
+# missing (apt-based systems).
 set -euo pipefail
 cd "$(dirname "$0")"
 
-if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
+# System libraries open3d links against, with their Debian packages.
+needed=(libusb-1.0.so.0:libusb-1.0-0 libGL.so.1:libgl1 libEGL.so.1:libegl1 libX11.so.6:libx11-6
+        libudev.so.1:libudev1 libidn2.so.0:libidn2-0 libgomp.so.1:libgomp1)
+missing=()
+for entry in "${needed[@]}"; do
+  ldconfig -p 2>/dev/null | grep -q "${entry%%:*}" || missing+=("${entry##*:}")
+done
+if [ ${#missing[@]} -gt 0 ]; then
   if command -v apt-get >/dev/null 2>&1; then
     sudo=""
     [ "$(id -u)" -ne 0 ] && sudo="sudo"
-    echo "installing libusb-1.0-0 (needed by open3d)"
-    $sudo apt-get update -qq && $sudo apt-get install -y -qq libusb-1.0-0 >/dev/null
+    echo "installing ${missing[*]} (needed by open3d)"
+    $sudo apt-get update -qq && $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
   else
-    echo "warning: libusb-1.0 is missing; install it with your package manager (open3d needs it)" >&2
+    echo "warning: missing system libraries for open3d: ${missing[*]}; install them with your package manager" >&2
   fi
 fi
 
-# torch is pinned (==2.13.0) in pyproject.toml so pip takes the CPU wheel, not the CUDA stack.
+# torch is pinned (==2.13.0) in pyproject.toml. Where pip is configured with a local CPU wheel
+# (find-links, as on our development machines) it takes that; elsewhere add
+# PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu to get the CPU build, not CUDA.
 python3 -m pip install --quiet --disable-pip-version-check -e ".[all,dev]"

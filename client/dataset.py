@@ -79,6 +79,28 @@ class SceneViews:
         return cls(np.asarray(depth, dtype=np.float32), np.asarray(poses).reshape(-1, 4, 4))
 
 
+def _heal_torn_tail(stream) -> None:
+    """Cut an unfinished last line and the rows of the scene it belonged to (the header,
+    line 0, always stays)."""
+    stream.seek(0)
+    text = stream.read()
+    if not text or text.endswith("\n"):
+        return
+    cut = text.rfind("\n") + 1
+    lines, fragment = text[:cut].splitlines(keepends=True), text[cut:]
+    fragment_id = fragment.split(",")[0]
+    last_id = lines[-1].split(",")[0] if len(lines) > 1 else None
+    # The fragment names its scene, or it was torn inside the id: then it may be the last scene's.
+    torn_id = (
+        fragment_id if "," in fragment else last_id if last_id and last_id.startswith(fragment_id) else None
+    )
+    while len(lines) > 1 and lines[-1].split(",")[0] == torn_id:
+        lines.pop()
+    stream.seek(0)
+    stream.truncate()
+    stream.write("".join(lines))
+
+
 def _csv_lines(scene_ids, rows: np.ndarray) -> str:
     """grasps.csv lines for rows (qx, qy, qz, qw, x, y, z, width, label)."""
     return "".join(
@@ -125,12 +147,20 @@ class RawDataset:
         rows = np.asarray(grasps, dtype=np.float64).reshape(-1, 9)
         self._append(_csv_lines([scene_id] * len(rows), rows))
 
-    def _append(self, text: str) -> None:
+    def mark_empty(self, scene_id: str) -> None:
+        """Record a scene that produced no grasps (nothing on the table, nothing seen), so a
+        resumed run does not rebuild it."""
+        self._append(f"{scene_id}\n", self.root / "empty_scenes.txt")
+
+    def _append(self, text: str, path: Path | None = None) -> None:
+        """Append whole lines under an exclusive lock. A torn last line (a writer killed
+        mid-write) is cut first, with the rows of its scene, which then counts as not done."""
         import fcntl
 
-        with self.grasps_path.open("a") as stream:
+        with (path or self.grasps_path).open("a+") as stream:
             fcntl.flock(stream, fcntl.LOCK_EX)
             try:
+                _heal_torn_tail(stream)
                 stream.write(text)
                 stream.flush()
                 os.fsync(stream.fileno())
@@ -149,11 +179,14 @@ class RawDataset:
         return [r["scene_id"] for r in rows], values.reshape(-1, 9)
 
     def done_scene_ids(self) -> set[str]:
-        """Scenes whose grasps were written: complete, never to be generated again."""
-        return {row["scene_id"] for row in self.grasp_rows()}
+        """Scenes whose grasps were written, or that came out empty: never generated again."""
+        empty_path = self.root / "empty_scenes.txt"
+        empty = set(empty_path.read_text().split()) if empty_path.exists() else set()
+        return {row["scene_id"] for row in self.grasp_rows()} | empty
 
     def scene_ids(self) -> list[str]:
-        return sorted(self.done_scene_ids())
+        """Scenes with grasps."""
+        return sorted({row["scene_id"] for row in self.grasp_rows()})
 
     def read_scene(self, scene_id: str) -> SceneViews:
         with np.load(self.scenes_dir / f"{scene_id}.npz") as data:

@@ -7,6 +7,7 @@ unique temporary file beside the target, is flushed to disk, then renamed over i
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import tempfile
 from collections.abc import Iterator
@@ -37,6 +38,25 @@ def atomic_writer(path: Path, mode: str = "wb") -> Iterator[IO]:
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
+
+
+def check_settings(path: Path, settings: dict, may_change: tuple[str, ...] = ()) -> None:
+    """Record a run's settings in ``path``, or, resuming, refuse settings that differ from
+    the recorded ones (except ``may_change``): one folder holds one kind of run."""
+    path = Path(path)
+    if path.exists():
+        previous = json.loads(path.read_text())
+        changed = sorted(
+            k
+            for k in set(previous) | set(settings)
+            if k not in may_change and previous.get(k) != settings.get(k)
+        )
+        if changed:
+            raise ValueError(
+                f"{path.parent} holds a run with other settings ({', '.join(changed)}); "
+                "use another folder, or the same settings to resume"
+            )
+    write_atomically(path, json.dumps(settings, indent=2, sort_keys=True) + "\n")
 
 
 def write_atomically(path: Path, data: str | bytes) -> None:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import multiprocessing
 import queue
 import sys
@@ -15,6 +16,7 @@ from pathlib import Path
 
 from client.dataset import RawDataset
 from client.embedded import EmbeddedService
+from client.files import check_settings
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
 
 
@@ -37,6 +39,13 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     try:
         dataset = RawDataset(out, dataset_setup())
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    settings = {k: v for k, v in dataclasses.asdict(config).items() if k != "renderer"}
+    settings["objects"] = list(settings["objects"])
+    try:
+        check_settings(out / "generation.json", settings)
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

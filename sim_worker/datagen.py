@@ -179,6 +179,7 @@ def generate(
             started = time.perf_counter()
             labelled = labeller.label_scene(index)
             if labelled is None:
+                dataset.mark_empty(sid)
                 if report:
                     report(sid, 0, time.perf_counter() - started)
                 continue

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from client.files import write_atomically
+from client.files import check_settings, write_atomically
 
 ROUND_COLUMNS = ["round_id", "scene_id", "object_count", "cleared", "attempts", "successes", "seconds"]
 GRASP_COLUMNS = [
@@ -78,26 +78,11 @@ class ResultsFolder:
     def __init__(self, path: Path, config: dict[str, Any]) -> None:
         self.path = Path(path)
         self.path.mkdir(parents=True, exist_ok=True)
-        self._check_config(config)
+        check_settings(self.path / "config.json", config, may_change=("rounds",))
         self.rounds = _read_csv(self.path / "rounds.csv")
         finished = {row["round_id"] for row in self.rounds}
         # Rows of a round that never finished are dropped: that round runs again.
         self.grasps = [row for row in _read_csv(self.path / "grasps.csv") if row["round_id"] in finished]
-
-    def _check_config(self, config: dict[str, Any]) -> None:
-        """A folder holds one run's settings; only the round count may grow on a resume."""
-        config_path = self.path / "config.json"
-        if config_path.exists():
-            previous = json.loads(config_path.read_text())
-            changed = sorted(
-                k for k in set(previous) | set(config) if k != "rounds" and previous.get(k) != config.get(k)
-            )
-            if changed:
-                raise ValueError(
-                    f"{self.path} holds results of a run with other settings ({', '.join(changed)}); "
-                    "use another --results folder or the same settings to resume"
-                )
-        write_atomically(config_path, json.dumps(config, indent=2, sort_keys=True) + "\n")
 
     def finished_rounds(self) -> set[int]:
         return {int(row["round_id"]) for row in self.rounds}

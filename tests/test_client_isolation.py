@@ -43,7 +43,8 @@ def test_cli_against_a_live_service(server, command):
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    assert server.url in result.stdout or "sessions" in result.stdout
+    expected = f"service   {server.url}: up" if command == ["status"] else "sessions"
+    assert expected in result.stdout
 
 
 def test_cli_grasps_and_errors(server, vgn):

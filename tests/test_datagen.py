@@ -137,3 +137,38 @@ def test_labels_of_a_generated_scene_replay(server, tmp_path: Path):
             assert trial.label == 1
         finally:
             labeller.close()
+
+
+def test_a_torn_write_is_healed_before_the_next_append(tmp_path: Path):
+    """A writer killed mid-line leaves a partial row: the next append cuts it along with the
+    rest of that scene's rows, so the scene counts as not done and is generated again."""
+    make_dataset(tmp_path, [("a", [0.1, 0.1, 0.1], 1), ("b", [0.1, 0.2, 0.1], 0)])
+    with (tmp_path / "grasps.csv").open("a") as stream:
+        stream.write("c,0,0,0,1,0.1,0.1,0.1,0.05,1\nc,0.1,0.2")  # scene c: one row, then torn
+    dataset = RawDataset(tmp_path)
+    assert "c" in dataset.done_scene_ids()  # readers alone cannot tell that c is incomplete
+    poses = np.stack(circle_views(1))
+    dataset.add_scene(
+        "d",
+        SceneViews(np.full((1, 480, 640), 0.5, np.float32), poses),
+        np.array([[0, 0, 0, 1, 0.2, 0.2, 0.1, 0.05, 0]]),
+    )
+    ids, grasps = RawDataset(tmp_path).grasps()
+    assert ids == ["a", "b", "d"] and grasps.shape == (3, 9)
+    assert (tmp_path / "grasps.csv").read_text().endswith("\n")
+
+
+def test_empty_scenes_count_as_done(tmp_path: Path):
+    dataset = make_dataset(tmp_path, [("a", [0.1, 0.1, 0.1], 1)])
+    dataset.mark_empty("e")
+    assert RawDataset(tmp_path).done_scene_ids() == {"a", "e"}
+    assert RawDataset(tmp_path).scene_ids() == ["a"]
+
+
+def test_resume_with_other_generation_settings_is_refused(server, tmp_path: Path):
+    out = tmp_path / "data"
+    assert generate(server.url, out, scenes=1).returncode == 0
+    command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", server.url, "--scene", "packed",
+               "--objects", "blocks", "--scenes", "2", "--points", "8", "--out", str(out)]  # fmt: skip
+    refused = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert refused.returncode == 2 and "other settings (scene)" in refused.stderr
