@@ -167,26 +167,33 @@ class RawDataset:
             finally:
                 fcntl.flock(stream, fcntl.LOCK_UN)
 
-    def grasp_rows(self) -> list[dict[str, str]]:
-        """Rows of grasps.csv; a torn last line (a writer killed mid-write) is skipped."""
+    def _rows(self) -> list[list[str]]:
+        """Rows of grasps.csv as lists of fields; a torn last line (a writer killed
+        mid-write, fewer fields) is skipped. Plain lists keep 2 M rows affordable."""
         with self.grasps_path.open(newline="") as stream:
-            return [row for row in csv.DictReader(stream) if row.get("label") not in (None, "")]
+            reader = csv.reader(stream)
+            next(reader, None)
+            return [row for row in reader if len(row) == len(GRASP_COLUMNS) and row[-1]]
+
+    def grasp_rows(self) -> list[dict[str, str]]:
+        """Rows of grasps.csv as dicts (convenient for small datasets)."""
+        return [dict(zip(GRASP_COLUMNS, row, strict=True)) for row in self._rows()]
 
     def grasps(self) -> tuple[list[str], np.ndarray]:
         """Scene ids and an (M, 9) array (qx, qy, qz, qw, x, y, z, width, label)."""
-        rows = self.grasp_rows()
-        values = np.array([[float(r[c]) for c in GRASP_COLUMNS[1:]] for r in rows], dtype=np.float64)
-        return [r["scene_id"] for r in rows], values.reshape(-1, 9)
+        rows = self._rows()
+        values = np.array([row[1:] for row in rows], dtype=np.float64).reshape(-1, 9)
+        return [row[0] for row in rows], values
 
     def done_scene_ids(self) -> set[str]:
         """Scenes whose grasps were written, or that came out empty: never generated again."""
         empty_path = self.root / "empty_scenes.txt"
         empty = set(empty_path.read_text().split()) if empty_path.exists() else set()
-        return {row["scene_id"] for row in self.grasp_rows()} | empty
+        return {row[0] for row in self._rows()} | empty
 
     def scene_ids(self) -> list[str]:
         """Scenes with grasps."""
-        return sorted({row["scene_id"] for row in self.grasp_rows()})
+        return sorted({row[0] for row in self._rows()})
 
     def read_scene(self, scene_id: str) -> SceneViews:
         with np.load(self.scenes_dir / f"{scene_id}.npz") as data:
@@ -206,7 +213,7 @@ def clean_and_balance(source: Path, destination: Path, seed: int = 0) -> int:
     if Path(destination).resolve() == Path(source).resolve():
         raise ValueError("clean-data writes a new folder: give a destination other than the source")
     dst = RawDataset(destination, src.setup)
-    if dst.grasp_rows():
+    if dst.scene_ids():
         raise ValueError(f"{destination} already holds grasps: choose an empty folder")
     ids, grasps = src.grasps()
     ids = np.asarray(ids)
