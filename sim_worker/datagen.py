@@ -1,8 +1,8 @@
 """Labelled grasp data through the service (VGN's data generation, DESIGN §4).
 
 Per scene: build a pile or packed scene, render 1-6 random views, post them to a session,
-read the fused point cloud with normals back from the service, and label 120 grasp points
-by trying 6 yaws each in simulation. The output is VGN's raw layout (client.dataset).
+read the fused grid (to skip scenes where nothing was observed) and the point cloud with
+normals back from the service, and label 120 grasp points by trying 6 yaws each in simulation. The output is VGN's raw layout (client.dataset).
 """
 
 from __future__ import annotations
@@ -109,6 +109,8 @@ class SceneLabeller:
         if not self.world.objects:
             return None
         views = self._observe(rng)
+        if not np.any(self.vgn.tsdf(self.session_id) > 0.5):
+            return None  # the fused grid holds no observed surface: nothing to label
         cloud = self.vgn.cloud(self.session_id)
         inside = np.all((cloud[:, :3] >= VALID_LOWER) & (cloud[:, :3] <= VALID_UPPER), axis=1)
         candidates = cloud[inside & (cloud[:, 5] > MIN_NORMAL_Z)]
