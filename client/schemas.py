@@ -9,7 +9,7 @@ quaternions ``[x, y, z, w]``, camera poses camera→world in the OpenCV optical 
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
@@ -174,6 +174,11 @@ def _parse_vector3(name: str, text: str | None) -> tuple[float, float, float] | 
 class GraspQuery(_Model):
     """Options of one grasp request (query parameters of ``GET /sessions/{id}/grasps``)."""
 
+    planner: Literal["vgn", "antipodal"] = Field(
+        default="vgn",
+        description="'vgn': the network; 'antipodal': a geometric sampling baseline on the fused "
+        "point cloud (needs no model; nms_size does not apply to it)",
+    )
     threshold: float = Field(default=0.9, ge=0.0, le=1.0, description="minimum grasp quality")
     max_grasps: int | None = Field(default=None, ge=1, le=10000, description="return at most this many")
     nms_size: int = Field(default=4, ge=1, le=15, description="non-maximum suppression window (voxels)")
@@ -240,7 +245,7 @@ class GraspResult(_Model):
     planning_ms: float = Field(description="grid read-out + network + detection on the service")
     integration_ms: float = Field(description="total integration time of the fused frames")
     frame_count: int
-    model: str = Field(description="id of the weights that planned these grasps")
+    model: str = Field(description="id of the weights that planned these grasps, or 'antipodal'")
 
 
 class ModelInfo(_Model):

@@ -20,9 +20,10 @@ from client.schemas import (
     SessionCreate,
     SessionInfo,
 )
+from service.baseline import plan_antipodal
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady
-from service.planner import NO_MODEL_MESSAGE, GraspPlanner
+from service.planner import NO_MODEL_MESSAGE, GraspPlanner, antipodal_config
 from service.sessions import SessionStore
 from service.settings import Settings
 
@@ -144,6 +145,8 @@ class PlanningService:
     def plan(self, session_id: str, query: GraspQuery) -> GraspResult:
         """Ranked grasps (world frame, best first) on the session's fused volume."""
         self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
+        if query.planner == "antipodal":
+            return self._plan_antipodal(session_id, query)
         if not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         with self.sessions.use(session_id) as session:
@@ -160,6 +163,23 @@ class PlanningService:
             integration_ms=round(integration_ms, 3),
             frame_count=frame_count,
             model=self.planner.model_id or "",
+        )
+
+    def _plan_antipodal(self, session_id: str, query: GraspQuery) -> GraspResult:
+        """The geometric baseline on the session's point cloud; needs no model."""
+        with self.sessions.use(session_id) as session:
+            started = time.perf_counter()
+            cloud = session.volume.cloud()
+            workspace_pose = session.volume.workspace_pose
+            frame_count, integration_ms = session.frame_count, session.integration_ms
+        grasps = plan_antipodal(cloud, workspace_pose, antipodal_config(query))
+        planning_ms = (time.perf_counter() - started) * 1e3
+        return GraspResult(
+            grasps=grasps,
+            planning_ms=round(planning_ms, 3),
+            integration_ms=round(integration_ms, 3),
+            frame_count=frame_count,
+            model="antipodal",
         )
 
     def model_info(self) -> ModelInfo:

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from client.schemas import Grasp, GraspQuery
+from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.vgn.checkpoint import load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
@@ -32,6 +33,20 @@ def detection_config(query: GraspQuery) -> DetectionConfig:
         crop_max=crop_max,
         approach=query.approach_direction,
         max_approach_angle=None if angle is None else math.radians(angle),
+    )
+
+
+def antipodal_config(query: GraspQuery) -> AntipodalConfig:
+    """Settings of the geometric baseline for one grasp request: the same threshold,
+    ``max_grasps``, crop (workspace frame) and approach cone as VGN's detection."""
+    detection = detection_config(query)
+    return AntipodalConfig(
+        threshold=detection.threshold,
+        max_grasps=detection.max_grasps,
+        crop_min=detection.crop_min,
+        crop_max=detection.crop_max,
+        approach=detection.approach,
+        max_approach_angle=detection.max_approach_angle,
     )
 
 

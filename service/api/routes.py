@@ -191,7 +191,8 @@ async def add_frame(service: Core, session_id: str, request: Request):
 def grasps(
     service: Core, session_id: str, request: Request, query: Annotated[GraspQuery, Query()]
 ) -> GraspResult:
-    """Ranked grasps, best first, in the world frame, planned by VGN on the fused volume."""
+    """Ranked grasps, best first, in the world frame, planned by VGN on the fused volume, or
+    with `planner=antipodal` by a geometric baseline on the fused point cloud (no model needed)."""
     result = service.plan(session_id, query)
     metrics(request).planning.observe(result.planning_ms / 1e3)
     metrics(request).grasps.inc(len(result.grasps))
