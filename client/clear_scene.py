@@ -29,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
         views=args.views,
         selection=args.selection,
         noise=args.noise,
+        planner=args.planner,
         renderer=args.renderer,
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
@@ -45,14 +46,15 @@ def run(args: argparse.Namespace) -> int:
                 return 2
         vgn = stack.enter_context(VGNClient(url, api_key=args.api_key))
         readiness = vgn.ready()
-        if not readiness.ready:
+        if not readiness.ready and config.planner == "vgn":
             print(
                 f"error: the service at {url} cannot plan: {readiness.detail} (pass --model PATH)",
                 file=sys.stderr,
             )
             return 2
         # The weights are part of the run's identity: a resume with other weights is refused.
-        config = dataclasses.replace(config, model=vgn.model().model_id)
+        model = vgn.model().model_id if config.planner == "vgn" else "antipodal"
+        config = dataclasses.replace(config, model=model)
         try:
             results = ResultsFolder(results_dir, config.as_json())
         except ValueError as error:

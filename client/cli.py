@@ -132,6 +132,8 @@ def _add_clear_scene(commands) -> None:
         help="execute the best grasp, or a random one above threshold (as the paper)",
     )
     clear.add_argument("--noise", action="store_true", help="add depth noise (robustness runs)")
+    clear.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn",
+                       help="the VGN network, or the service's geometric antipodal baseline (no model needed)")  # fmt: skip
     clear.add_argument(
         "--results",
         help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",

@@ -40,6 +40,7 @@ class ClutterConfig:
     threshold: float = 0.9
     views: str = "six"  # six | side
     selection: str = "best"  # best | random
+    planner: str = "vgn"  # vgn | antipodal (the service's geometric baseline)
     noise: bool = False
     renderer: str = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
@@ -102,7 +103,9 @@ class ClutterRemoval:
         while self.world.objects and failures < MAX_CONSECUTIVE_FAILURES:
             integration_ms = self._observe()
             client_started = time.perf_counter()
-            answer = self.vgn.grasps(self.session_id, threshold=self.config.threshold)
+            answer = self.vgn.grasps(
+                self.session_id, threshold=self.config.threshold, planner=self.config.planner
+            )
             client_ms = (time.perf_counter() - client_started) * 1e3
             if not answer.grasps:
                 break

@@ -140,3 +140,14 @@ def test_longer_runs(server, tmp_path: Path, scene: str, extra: list[str]):
                       "--results", str(results), *extra)  # fmt: skip
     assert run.returncode == 0, run.stderr
     check_results(results, 3)
+
+
+def test_baseline_planner_needs_no_model(tmp_path: Path, monkeypatch):
+    """clear-scene with the service's antipodal baseline runs on an embedded service without weights."""
+    monkeypatch.delenv("VGN_MODEL", raising=False)
+    results = tmp_path / "baseline"
+    run = clear_scene("--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--results", str(results))
+    assert run.returncode == 0, run.stderr
+    summary = check_results(results, 1)
+    assert json.loads((results / "config.json").read_text())["model"] == "antipodal"
+    assert summary["rounds"] == 1
