@@ -143,43 +143,29 @@ class PlanningService:
             return session.volume.cloud()
 
     def plan(self, session_id: str, query: GraspQuery) -> GraspResult:
-        """Ranked grasps (world frame, best first) on the session's fused volume."""
+        """Ranked grasps (world frame, best first) on the session's fused volume, by VGN or,
+        with ``planner="antipodal"``, by the geometric baseline on its cloud (no model needed)."""
         self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
-        if query.planner == "antipodal":
-            return self._plan_antipodal(session_id, query)
-        if not self.planner.ready:
+        baseline = query.planner == "antipodal"
+        if not baseline and not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
-            grid = session.volume.grid()
+            observed = session.volume.cloud() if baseline else session.volume.grid()
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             frame_count, integration_ms = session.frame_count, session.integration_ms
-        # The forward pass runs outside the session lock so frames can keep arriving.
-        grasps, _ = self.planner.plan(grid, voxel_size, workspace_pose, query)
-        planning_ms = (time.perf_counter() - started) * 1e3
+        # Planning runs outside the session lock so frames can keep arriving.
+        if baseline:
+            grasps, model = plan_antipodal(observed, workspace_pose, antipodal_config(query)), "antipodal"
+        else:
+            grasps, _ = self.planner.plan(observed, voxel_size, workspace_pose, query)
+            model = self.planner.model_id or ""
         return GraspResult(
             grasps=grasps,
-            planning_ms=round(planning_ms, 3),
+            planning_ms=round((time.perf_counter() - started) * 1e3, 3),
             integration_ms=round(integration_ms, 3),
             frame_count=frame_count,
-            model=self.planner.model_id or "",
-        )
-
-    def _plan_antipodal(self, session_id: str, query: GraspQuery) -> GraspResult:
-        """The geometric baseline on the session's point cloud; needs no model."""
-        with self.sessions.use(session_id) as session:
-            started = time.perf_counter()
-            cloud = session.volume.cloud()
-            workspace_pose = session.volume.workspace_pose
-            frame_count, integration_ms = session.frame_count, session.integration_ms
-        grasps = plan_antipodal(cloud, workspace_pose, antipodal_config(query))
-        planning_ms = (time.perf_counter() - started) * 1e3
-        return GraspResult(
-            grasps=grasps,
-            planning_ms=round(planning_ms, 3),
-            integration_ms=round(integration_ms, 3),
-            frame_count=frame_count,
-            model="antipodal",
+            model=model,
         )
 
     def model_info(self) -> ModelInfo:
