@@ -146,8 +146,23 @@ def test_baseline_planner_needs_no_model(tmp_path: Path, monkeypatch):
     """clear-scene with the service's antipodal baseline runs on an embedded service without weights."""
     monkeypatch.delenv("VGN_MODEL", raising=False)
     results = tmp_path / "baseline"
-    run = clear_scene("--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--results", str(results))
+    run = clear_scene(
+        "--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--results", str(results)
+    )
     assert run.returncode == 0, run.stderr
     summary = check_results(results, 1)
     assert json.loads((results / "config.json").read_text())["model"] == "antipodal"
     assert summary["rounds"] == 1
+
+
+def test_benchmark_table_next_to_the_paper(tmp_path: Path):
+    from benchmarks.clutter import main
+
+    out = tmp_path / "bench"
+    assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
+                 "--renderer", "tiny", "--out", str(out)]) == 0  # fmt: skip
+    rows = json.loads((out / "table.json").read_text())
+    assert [(r["planner"], r["scenario"], r["rounds"]) for r in rows] == [("antipodal", "blocks-5", 1)]
+    assert "| antipodal | best | blocks-5 | 1 |" in (out / "table.md").read_text()
+    assert "87.6 / 90.1" in (out / "table.md").read_text(), "the paper's Table 1 row stands beside ours"
+    assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()
