@@ -45,7 +45,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--url", help="use a running service instead of an embedded one")
     parser.add_argument("--rounds", type=int, default=100, help="rounds per scenario (default %(default)s)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--threshold", type=float, default=0.9)
+    parser.add_argument("--threshold", type=float, default=0.9, help="VGN's quality threshold (default %(default)s)")
+    parser.add_argument(
+        "--antipodal-threshold",
+        type=float,
+        default=0.5,
+        help="the baseline's geometric-score threshold (default %(default)s; its scores are not probabilities)",
+    )
     parser.add_argument("--planners", nargs="+", choices=["vgn", "antipodal"], default=["vgn", "antipodal"])
     parser.add_argument("--selections", nargs="+", choices=["best", "random"], default=["best", "random"])
     parser.add_argument("--scenarios", nargs="+", default=DEFAULT_SCENARIOS, help="SCENE-COUNT, e.g. pile-10")
@@ -65,7 +71,7 @@ def scenario_config(
     objects = {"pile": args.pile_objects, "packed": args.packed_objects}.get(scene)
     return ClutterConfig(
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
-        threshold=args.threshold, selection=selection, planner=planner, renderer=args.renderer, model=model,
+        threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection, planner=planner, renderer=args.renderer, model=model,
     )  # fmt: skip
 
 
@@ -104,7 +110,8 @@ def format_row(row: dict) -> str:
 
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     lines = [
-        f"threshold {args.threshold}, seed {args.seed}, rounds per scenario {args.rounds}",
+        f"VGN threshold {args.threshold}, antipodal threshold {args.antipodal_threshold}, seed {args.seed}, "
+        f"rounds per scenario {args.rounds}",
         "",
         "| planner | selection | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) | planning p50 ms | paper success / cleared |",
         "| --- | --- | --- | ---: | --- | --- | ---: | --- |",

@@ -257,6 +257,11 @@ class ModelInfo(_Model):
     device: str
     detail: str | None = Field(default=None, description="why no model is loaded, if none is")
     conventions: dict[str, str]
+    card: dict[str, Any] | None = Field(
+        default=None,
+        description="from the model card beside the weights (<name>.card.json), when there is one: "
+        "training date, scenes and grasps, epochs, validation figures, the command that reproduces them",
+    )
 
 
 class Health(_Model):

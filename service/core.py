@@ -178,4 +178,5 @@ class PlanningService:
             device=str(self.planner.device),
             detail=None if self.planner.ready else NO_MODEL_MESSAGE,
             conventions=CONVENTIONS,
+            card=self.planner.card,
         )

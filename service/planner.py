@@ -7,6 +7,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -14,7 +15,7 @@ import torch
 from client.schemas import Grasp, GraspQuery
 from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
-from service.vgn.checkpoint import load_vgn, weights_id
+from service.vgn.checkpoint import card_summary, load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.network import PARAMETER_COUNT, VGN
 
@@ -71,10 +72,18 @@ class GraspPlanner:
     Without weights the planner exists but is not ready: ``plan`` raises ``ModelNotReady``.
     """
 
-    def __init__(self, network: VGN | None, device: torch.device, model_id: str | None, source: str | None):
+    def __init__(
+        self,
+        network: VGN | None,
+        device: torch.device,
+        model_id: str | None,
+        source: str | None,
+        card: dict[str, Any] | None = None,
+    ):
         self.device = device
         self.model_id = model_id
         self.source = source
+        self.card = card
         self._network = network.to(device) if network is not None else None
         self._lock = threading.Lock()  # one forward at a time: the CPU has no spare cores
 
@@ -84,7 +93,7 @@ class GraspPlanner:
         torch_device = resolve_device(device)
         if path is None:
             return cls(None, torch_device, None, None)
-        planner = cls(load_vgn(path), torch_device, weights_id(path), str(path))
+        planner = cls(load_vgn(path), torch_device, weights_id(path), str(path), card_summary(path))
         planner.warm_up()
         return planner
 

@@ -8,8 +8,10 @@ from typing import Literal
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-#: Where a packaged default model would live; the service uses it when ``VGN_MODEL`` is unset.
+#: The packaged default model; the service uses it when ``VGN_MODEL`` is unset.
 PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
+#: ``VGN_MODEL=none``: serve without a model (the antipodal planner still works).
+NO_MODEL = "none"
 
 
 class Settings(BaseSettings):
@@ -17,10 +19,10 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="VGN_", extra="ignore")
 
-    model: Path | None = Field(
+    model: Literal["none"] | Path | None = Field(
         default=None,
         description="weights file (.safetensors preferred, or a .pt/.pth state_dict); "
-        "when unset the packaged default is used if one ships",
+        "when unset the packaged default is used; 'none' serves without a model (antipodal planner only)",
     )
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device")
     torch_threads: int | None = Field(default=None, ge=1, description="torch intra-op threads")
@@ -43,10 +45,17 @@ class Settings(BaseSettings):
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
         """``VGN_API_KEY=`` or ``VGN_MODEL=`` in an env file means "not set"."""
-        return None if value == "" else value
+        if value == "":
+            return None
+        if isinstance(value, str) and value.strip().lower() == NO_MODEL:
+            return NO_MODEL
+        return value
 
     def model_path(self) -> Path | None:
-        """The weights to load: ``VGN_MODEL``, else the packaged default if it exists."""
+        """The weights to load: ``VGN_MODEL``, else the packaged default if it exists; ``None``
+        for ``VGN_MODEL=none``."""
+        if self.model == NO_MODEL:
+            return None
         if self.model is not None:
-            return self.model
+            return Path(self.model)
         return PACKAGED_MODEL if PACKAGED_MODEL.exists() else None

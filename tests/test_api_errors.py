@@ -589,11 +589,16 @@ def test_cloud_in_an_unserved_media_type_is_406(shared_http: TestClient, fused: 
 # No model --------------------------------------------------------------------------------
 @pytest.fixture
 def no_model_http() -> Iterator[TestClient]:
-    settings = Settings(model=None, api_key=None)
-    if settings.model_path() is not None:
-        pytest.skip(f"a packaged model ships at {settings.model_path()}, so model=None still loads one")
+    settings = Settings(model="none", api_key=None)  # VGN_MODEL=none, even though a default ships
     with TestClient(create_app(core=PlanningService.from_settings(settings))) as client:
         yield client
+
+
+def test_vgn_model_none_turns_the_model_off(monkeypatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("VGN_MODEL", "None")
+    assert Settings().model_path() is None
+    monkeypatch.setenv("VGN_MODEL", str(tmp_path / "vgn.safetensors"))
+    assert Settings().model_path() == tmp_path / "vgn.safetensors"
 
 
 def test_without_a_model_the_service_is_live_but_not_ready(no_model_http: TestClient) -> None:

@@ -30,6 +30,9 @@ def test_generate_train_load_plan(server, tmp_path: Path):
     with EmbeddedService(model=weights) as service, VGNClient(service.url) as vgn:
         model = vgn.model()
         assert model.loaded and model.source == str(weights)
+        assert model.card is not None, "the service tells which data and command made its weights"
+        assert model.card["matches_weights"] and model.card["scenes"] == 2 and model.card["epochs"] == 1
+        assert model.card["command"].startswith("vgn-train --data")
         session = vgn.create_session(intrinsics=INTRINSICS).session_id
         for pose in circle_views(3):
             vgn.add_frame(session, BoxScene().depth(pose), pose)

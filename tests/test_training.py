@@ -28,7 +28,8 @@ from service.training.labels import LabelSet
 from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
 from service.training.metrics import MetricAccumulator, rotation_error_deg
 from service.training.quaternions import flipped, multiply
-from service.vgn.checkpoint import load_vgn
+from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn
+from service.vgn.network import VGN
 from tests.scenes import TABLE_Z, BoxScene, circle_views
 
 N = 40
@@ -415,4 +416,18 @@ def test_train_resume_and_serve(dataset: RawDataset, tmp_path: Path, capsys, one
 
     load_vgn(out)  # strict
     planner = GraspPlanner.from_path(out, device="cpu")
+    assert planner.card is not None and planner.card["matches_weights"] and planner.card["epochs"] == 2
     assert planner.ready and planner.infer(np.zeros((N, N, N), np.float32)).quality.shape == (N, N, N)
+
+
+def test_card_summary_needs_a_card_that_belongs_to_the_weights(tmp_path: Path):
+    weights = tmp_path / "vgn.safetensors"
+    torch.manual_seed(0)
+    save_vgn(VGN(), weights)
+    assert card_summary(weights) is None, "weights without a card are fine, they just say nothing"
+    card_path(weights).write_text("{not json")
+    assert card_summary(weights) is None, "an unreadable card must not stop the service"
+    card_path(weights).write_text(json.dumps({"model": {"weights_id": "0" * 12}, "datasets": [{"scenes": 3}]}))
+    summary = card_summary(weights)
+    assert summary is not None and summary["scenes"] == 3
+    assert not summary["matches_weights"], "a card copied beside other weights is flagged"

@@ -12,15 +12,10 @@ from pathlib import Path
 from typing import Any
 
 from client.files import write_atomically
-from service.vgn.checkpoint import weights_id
+from service.vgn.checkpoint import card_path, weights_id
 from service.vgn.network import PARAMETER_COUNT
 
 CARD_FORMAT = 1
-
-
-def card_path(out: Path) -> Path:
-    """``vgn.safetensors`` → ``vgn.card.json`` beside it."""
-    return out.with_suffix(".card.json")
 
 
 def code_version() -> dict[str, str | None]:

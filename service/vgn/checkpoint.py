@@ -4,7 +4,9 @@ arbitrary objects)."""
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
+from typing import Any
 
 import torch
 from safetensors.torch import load_file, save
@@ -26,6 +28,35 @@ def weights_id(path: Path) -> str:
         for block in iter(lambda: stream.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()[:12]
+
+
+def card_path(weights: Path) -> Path:
+    """The model card beside a weights file: ``vgn.safetensors`` → ``vgn.card.json``."""
+    return weights.with_suffix(".card.json")
+
+
+def card_summary(weights: Path) -> dict[str, Any] | None:
+    """What ``GET /model`` tells about the weights from their card: when and on what they were
+    trained, their validation figures and the command that reproduces them. ``None`` without a
+    readable card (weights from elsewhere need none)."""
+    try:
+        card = json.loads(card_path(weights).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(card, dict):
+        return None
+    datasets = card.get("datasets") or []
+    final = (card.get("metrics") or {}).get("final") or {}
+    return {
+        "date": card.get("date"),
+        "matches_weights": (card.get("model") or {}).get("weights_id") == weights_id(weights),
+        "scenes": sum(int(d.get("scenes", 0)) for d in datasets if isinstance(d, dict)),
+        "grasps": sum(int(d.get("grasps", 0)) for d in datasets if isinstance(d, dict)),
+        "epochs": card.get("epochs"),
+        "validation": final.get("val"),
+        "command": card.get("command"),
+        "code_version": card.get("code_version"),
+    }
 
 
 def read_state_dict(path: Path) -> dict[str, torch.Tensor]:
