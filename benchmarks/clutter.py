@@ -45,7 +45,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--url", help="use a running service instead of an embedded one")
     parser.add_argument("--rounds", type=int, default=100, help="rounds per scenario (default %(default)s)")
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--threshold", type=float, default=0.9, help="VGN's quality threshold (default %(default)s)")
+    parser.add_argument(
+        "--threshold", type=float, default=0.9, help="VGN's quality threshold (default %(default)s)"
+    )
     parser.add_argument(
         "--antipodal-threshold",
         type=float,

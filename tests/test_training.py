@@ -427,7 +427,9 @@ def test_card_summary_needs_a_card_that_belongs_to_the_weights(tmp_path: Path):
     assert card_summary(weights) is None, "weights without a card are fine, they just say nothing"
     card_path(weights).write_text("{not json")
     assert card_summary(weights) is None, "an unreadable card must not stop the service"
-    card_path(weights).write_text(json.dumps({"model": {"weights_id": "0" * 12}, "datasets": [{"scenes": 3}]}))
+    card_path(weights).write_text(
+        json.dumps({"model": {"weights_id": "0" * 12}, "datasets": [{"scenes": 3}]})
+    )
     summary = card_summary(weights)
     assert summary is not None and summary["scenes"] == 3
     assert not summary["matches_weights"], "a card copied beside other weights is flagged"

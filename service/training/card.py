@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from client.files import write_atomically
-from service.vgn.checkpoint import card_path, weights_id
+from service.vgn.checkpoint import weights_id
 from service.vgn.network import PARAMETER_COUNT
 
 CARD_FORMAT = 1

@@ -21,7 +21,7 @@ from tqdm import tqdm
 from service.planner import resolve_device
 from service.training import report
 from service.training.augment import MAX_Z_SHIFT
-from service.training.card import build_card, card_path, write_card
+from service.training.card import build_card, write_card
 from service.training.checkpoint import (
     TrainingState,
     capture_rng,
@@ -42,7 +42,7 @@ from service.training.dataset import (
 from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.loss import gather, per_label_loss
 from service.training.metrics import THRESHOLD, MetricAccumulator
-from service.vgn.checkpoint import save_vgn
+from service.vgn.checkpoint import card_path, save_vgn
 from service.vgn.network import VGN
 
 
