@@ -360,6 +360,8 @@ def test_metrics_count_at_threshold_and_measure_errors():
     assert result["rotation_error_deg"] == pytest.approx(10.0, abs=1e-3)
     assert result["width_error_mm"] == pytest.approx(2 * VOXEL * 1e3)
     assert float(rotation_error_deg(flipped(batch.quaternion), batch.quaternion).max()) < 0.1
+    assert result["curve"]["0.5"] == {"precision": pytest.approx(2 / 3), "recall": 1.0}
+    assert result["curve"]["0.9"] == {"precision": 0.5, "recall": 0.5}
     assert MetricAccumulator().result()["precision"] is None
 
 

@@ -17,6 +17,8 @@ from service.training.quaternions import flipped
 
 #: Quality at or above this counts as a predicted success.
 THRESHOLD = 0.9
+#: Thresholds at which precision and recall are also kept, to choose a model's operating point.
+CURVE_THRESHOLDS = (0.5, 0.6, 0.7, 0.8, 0.9)
 
 #: Metric names in display order, with a short column title and format.
 COLUMNS: dict[str, tuple[str, str]] = {
@@ -45,6 +47,8 @@ class MetricAccumulator:
         self.positives = 0
         self.rotation_error_sum = 0.0
         self.width_error_sum = 0.0
+        #: threshold -> [true positives, predicted positives]
+        self.curve = {t: [0, 0] for t in CURVE_THRESHOLDS}
 
     @torch.no_grad()
     def update(self, predictions: Predictions, batch: Batch, losses: torch.Tensor) -> None:
@@ -58,6 +62,10 @@ class MetricAccumulator:
         self.false_negatives += int((~predicted & actual).sum())
         self.true_negatives += int((~predicted & ~actual).sum())
         self.positives += int(actual.sum())
+        for threshold, counts in self.curve.items():
+            predicted_at = predictions.quality >= threshold
+            counts[0] += int((predicted_at & actual).sum())
+            counts[1] += int(predicted_at.sum())
         if actual.any():
             errors = rotation_error_deg(predictions.quaternion[actual], batch.quaternion[actual])
             self.rotation_error_sum += float(errors.sum())
@@ -75,6 +83,13 @@ class MetricAccumulator:
             "width_error_mm": _ratio(self.width_error_sum, self.positives),
             "labels": self.labels,
             "positives": self.positives,
+            "curve": {
+                f"{threshold:.1f}": {
+                    "precision": _ratio(tp_at, predicted_at),
+                    "recall": _ratio(tp_at, self.positives),
+                }
+                for threshold, (tp_at, predicted_at) in self.curve.items()
+            },
         }
 
 
