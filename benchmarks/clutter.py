@@ -19,9 +19,11 @@ import json
 import sys
 from pathlib import Path
 
+from client.clear_scene import resolve_planner
 from client.embedded import EmbeddedService
 from client.files import write_atomically
 from client.http import VGNClient
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.results import ResultsFolder
 
@@ -39,19 +41,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument(
-        "--model", help="VGN weights for an embedded service (not needed for antipodal alone)"
-    )
+    parser.add_argument("--model", help="VGN weights for an embedded service (default: the packaged model)")
     parser.add_argument("--url", help="use a running service instead of an embedded one")
     parser.add_argument("--rounds", type=int, default=100, help="rounds per scenario (default %(default)s)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument(
-        "--threshold", type=float, default=0.9, help="VGN's quality threshold (default %(default)s)"
+        "--threshold", type=float, help="VGN's quality threshold (default: the model's operating threshold)"
     )
     parser.add_argument(
         "--antipodal-threshold",
         type=float,
-        default=0.5,
+        default=ANTIPODAL_DEFAULT_THRESHOLD,
         help="the baseline's geometric-score threshold (default %(default)s; its scores are not probabilities)",
     )
     parser.add_argument("--planners", nargs="+", choices=["vgn", "antipodal"], default=["vgn", "antipodal"])
@@ -66,33 +66,32 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def scenario_config(
-    args: argparse.Namespace, planner: str, selection: str, scenario: str, model: str
-) -> ClutterConfig:
+def scenario_config(args: argparse.Namespace, planner: str, selection: str, scenario: str) -> ClutterConfig:
     scene, count = scenario.rsplit("-", 1)
     objects = {"pile": args.pile_objects, "packed": args.packed_objects}.get(scene)
     return ClutterConfig(
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
-        threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection, planner=planner, renderer=args.renderer, model=model,
+        threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection,
+        planner=planner, renderer=args.renderer,
     )  # fmt: skip
 
 
 def run_all(args: argparse.Namespace, vgn: VGNClient) -> list[dict]:
-    model_id = vgn.model().model_id
     rows = []
     for planner in args.planners:
         for selection in args.selections:
             for scenario in args.scenarios:
-                config = scenario_config(
-                    args, planner, selection, scenario, model_id if planner == "vgn" else "antipodal"
-                )
+                config = resolve_planner(scenario_config(args, planner, selection, scenario), vgn)
                 results = ResultsFolder(args.out / f"{planner}-{selection}-{scenario}", config.as_json())
                 episode = ClutterRemoval(config, vgn, results)
                 try:
                     summary = episode.run()
                 finally:
                     episode.close()
-                rows.append({"planner": planner, "selection": selection, "scenario": scenario, **summary})
+                rows.append(
+                    {"planner": planner, "selection": selection, "scenario": scenario,
+                     "threshold": config.threshold, "model": config.model, **summary}
+                )  # fmt: skip
                 print(
                     f"{planner:9s} {selection:6s} {scenario:9s} {format_row(rows[-1])}",
                     file=sys.stderr,
@@ -112,18 +111,17 @@ def format_row(row: dict) -> str:
 
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     lines = [
-        f"VGN threshold {args.threshold}, antipodal threshold {args.antipodal_threshold}, seed {args.seed}, "
-        f"rounds per scenario {args.rounds}",
+        f"seed {args.seed}, rounds per scenario {args.rounds}",
         "",
-        "| planner | selection | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) | planning p50 ms | paper success / cleared |",
-        "| --- | --- | --- | ---: | --- | --- | ---: | --- |",
+        "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) | planning p50 ms | paper success / cleared |",
+        "| --- | --- | ---: | --- | ---: | --- | --- | ---: | --- |",
     ]
     for row in rows:
         paper = PAPER_TABLE_1.get(row["scenario"])
         success, cleared = row["success_rate"], row["percent_cleared"]
         planning = row["planning_ms"]["p50"] if row.get("planning_ms") else None
         lines.append(
-            f"| {row['planner']} | {row['selection']} | {row['scenario']} | {row['rounds']} | "
+            f"| {row['planner']} | {row['selection']} | {row['threshold']} | {row['scenario']} | {row['rounds']} | "
             f"{'-' if success is None else f'{success:.1f}'} ({row['success_rate_ci95'][0]:.1f}-{row['success_rate_ci95'][1]:.1f}) | "
             f"{'-' if cleared is None else f'{cleared:.1f}'} ({row['percent_cleared_ci95'][0]:.1f}-{row['percent_cleared_ci95'][1]:.1f}) | "
             f"{'-' if planning is None else f'{planning:.0f}'} | {f'{paper[0]} / {paper[1]}' if paper else '-'} |"
@@ -133,9 +131,6 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    if "vgn" in args.planners and not (args.model or args.url):
-        print("error: the vgn planner needs --model (or --url of a service with a model)", file=sys.stderr)
-        return 2
     args.out.mkdir(parents=True, exist_ok=True)
     with contextlib.ExitStack() as stack:
         url = (
@@ -143,6 +138,10 @@ def main(argv: list[str] | None = None) -> int:
             or stack.enter_context(EmbeddedService(model=args.model, log_path=args.out / "service.log")).url
         )
         vgn = stack.enter_context(VGNClient(url, timeout=120.0))
+        readiness = vgn.ready()
+        if "vgn" in args.planners and not readiness.ready:
+            print(f"error: the vgn planner cannot run: {readiness.detail} (pass --model)", file=sys.stderr)
+            return 2
         rows = run_all(args, vgn)
     table = markdown_table(rows, args)
     write_atomically(args.out / "table.md", table)

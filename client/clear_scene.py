@@ -13,9 +13,21 @@ from pathlib import Path
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient, VGNError
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.metrics import summary_table
 from sim_worker.results import ResultsFolder
+
+
+def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
+    """``config`` with the planner's identity filled in: the weights' id (a resume with other
+    weights is refused) and the threshold actually used when none was given."""
+    if config.planner == "vgn":
+        model = vgn.model()
+        threshold = model.threshold if config.threshold is None else config.threshold
+        return dataclasses.replace(config, model=model.model_id, threshold=threshold)
+    threshold = ANTIPODAL_DEFAULT_THRESHOLD if config.threshold is None else config.threshold
+    return dataclasses.replace(config, model="antipodal", threshold=threshold)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -53,8 +65,7 @@ def run(args: argparse.Namespace) -> int:
             )
             return 2
         # The weights are part of the run's identity: a resume with other weights is refused.
-        model = vgn.model().model_id if config.planner == "vgn" else "antipodal"
-        config = dataclasses.replace(config, model=model)
+        config = resolve_planner(config, vgn)
         try:
             results = ResultsFolder(results_dir, config.as_json())
         except ValueError as error:

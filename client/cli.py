@@ -22,6 +22,7 @@ from pathlib import Path
 import httpx
 
 from client.http import DEFAULT_URL, VGNClient, VGNError
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
 
 def _add_connection(parser: argparse.ArgumentParser) -> None:
@@ -57,7 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
     grasps = commands.add_parser("grasps", help="plan grasps on a session and print them")
     _add_connection(grasps)
     grasps.add_argument("session_id")
-    grasps.add_argument("--threshold", type=float, default=0.9, help="minimum quality (default %(default)s)")
+    grasps.add_argument(
+        "--threshold", type=float, help="minimum quality (default: the model's operating threshold)"
+    )
     grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
 
@@ -117,7 +120,10 @@ def _add_clear_scene(commands) -> None:
     clear.add_argument("--rounds", type=int, default=1, help="rounds to run (default %(default)s)")
     clear.add_argument("--seed", type=int, default=1, help="scene seed; round r uses (seed, r)")
     clear.add_argument(
-        "--threshold", type=float, default=0.9, help="grasp quality threshold (default %(default)s)"
+        "--threshold",
+        type=float,
+        help="grasp quality threshold (default: the model's operating threshold, from its card; "
+        f"{ANTIPODAL_DEFAULT_THRESHOLD} for --planner antipodal)",
     )
     clear.add_argument(
         "--views",

@@ -22,6 +22,12 @@ SESSION_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 MAX_IMAGE_SIDE = 8192
 #: Largest image area: every frame is decoded to float32 and buffered, so this bounds memory.
 MAX_IMAGE_PIXELS = 16_000_000
+#: VGN's detection threshold: the default for weights whose card names no operating threshold.
+VGN_DEFAULT_THRESHOLD = 0.9
+#: The antipodal baseline's default: its scores are geometric (a clean top-down antipodal grasp
+#: scores ~0.95, a side grasp ~0.85), and everything it returns already passed its antipodal and
+#: collision checks, so the threshold only drops poorly opposed contacts.
+ANTIPODAL_DEFAULT_THRESHOLD = 0.5
 
 
 class _Model(BaseModel):
@@ -179,7 +185,13 @@ class GraspQuery(_Model):
         description="'vgn': the network; 'antipodal': a geometric sampling baseline on the fused "
         "point cloud (needs no model; nms_size does not apply to it)",
     )
-    threshold: float = Field(default=0.9, ge=0.0, le=1.0, description="minimum grasp quality")
+    threshold: float | None = Field(
+        default=None,
+        ge=0.0,
+        le=1.0,
+        description="minimum grasp quality; default: for vgn the model's operating threshold (its card; "
+        f"{VGN_DEFAULT_THRESHOLD} without one, VGN's), for antipodal {ANTIPODAL_DEFAULT_THRESHOLD}",
+    )
     max_grasps: int | None = Field(default=None, ge=1, le=10000, description="return at most this many")
     nms_size: int = Field(default=4, ge=1, le=15, description="non-maximum suppression window (voxels)")
     crop_min: str | None = Field(
@@ -246,6 +258,7 @@ class GraspResult(_Model):
     integration_ms: float = Field(description="total integration time of the fused frames")
     frame_count: int
     model: str = Field(description="id of the weights that planned these grasps, or 'antipodal'")
+    threshold: float = Field(description="the quality threshold these grasps passed")
 
 
 class ModelInfo(_Model):
@@ -257,6 +270,10 @@ class ModelInfo(_Model):
     device: str
     detail: str | None = Field(default=None, description="why no model is loaded, if none is")
     conventions: dict[str, str]
+    threshold: float = Field(
+        description="threshold of grasp requests that give none: the model card's operating threshold, "
+        f"else {VGN_DEFAULT_THRESHOLD} (VGN's)"
+    )
     card: dict[str, Any] | None = Field(
         default=None,
         description="from the model card beside the weights (<name>.card.json), when there is one: "

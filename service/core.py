@@ -156,16 +156,20 @@ class PlanningService:
             frame_count, integration_ms = session.frame_count, session.integration_ms
         # Planning runs outside the session lock so frames can keep arriving.
         if baseline:
-            grasps, model = plan_antipodal(observed, workspace_pose, antipodal_config(query)), "antipodal"
+            config = antipodal_config(query)
+            grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
+            threshold = config.threshold
         else:
             grasps, _ = self.planner.plan(observed, voxel_size, workspace_pose, query)
             model = self.planner.model_id or ""
+            threshold = self.planner.default_threshold if query.threshold is None else query.threshold
         return GraspResult(
             grasps=grasps,
             planning_ms=round((time.perf_counter() - started) * 1e3, 3),
             integration_ms=round(integration_ms, 3),
             frame_count=frame_count,
             model=model,
+            threshold=threshold,
         )
 
     def model_info(self) -> ModelInfo:
@@ -178,5 +182,6 @@ class PlanningService:
             device=str(self.planner.device),
             detail=None if self.planner.ready else NO_MODEL_MESSAGE,
             conventions=CONVENTIONS,
+            threshold=self.planner.default_threshold,
             card=self.planner.card,
         )

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from client.schemas import Grasp, GraspQuery
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD, Grasp, GraspQuery
 from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
@@ -22,12 +22,13 @@ from service.vgn.network import PARAMETER_COUNT, VGN
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 
 
-def detection_config(query: GraspQuery) -> DetectionConfig:
-    """Detection settings of one grasp request (angles arrive in degrees)."""
+def detection_config(query: GraspQuery, default_threshold: float = VGN_DEFAULT_THRESHOLD) -> DetectionConfig:
+    """Detection settings of one grasp request (angles arrive in degrees); a request without a
+    threshold gets ``default_threshold`` (the model's operating threshold)."""
     crop_min, crop_max = query.crop_box or (None, None)
     angle = query.max_approach_angle
     return DetectionConfig(
-        threshold=query.threshold,
+        threshold=default_threshold if query.threshold is None else query.threshold,
         nms_size=query.nms_size,
         max_grasps=query.max_grasps,
         crop_min=crop_min,
@@ -40,7 +41,7 @@ def detection_config(query: GraspQuery) -> DetectionConfig:
 def antipodal_config(query: GraspQuery) -> AntipodalConfig:
     """Settings of the geometric baseline for one grasp request: the same threshold,
     ``max_grasps``, crop (workspace frame) and approach cone as VGN's detection."""
-    detection = detection_config(query)
+    detection = detection_config(query, ANTIPODAL_DEFAULT_THRESHOLD)
     return AntipodalConfig(
         threshold=detection.threshold,
         max_grasps=detection.max_grasps,
@@ -98,6 +99,14 @@ class GraspPlanner:
         return planner
 
     @property
+    def default_threshold(self) -> float:
+        """The threshold of requests that give none: the card's operating threshold, else VGN's."""
+        threshold = (self.card or {}).get("threshold")
+        if isinstance(threshold, int | float) and 0.0 <= threshold <= 1.0:
+            return float(threshold)
+        return VGN_DEFAULT_THRESHOLD
+
+    @property
     def ready(self) -> bool:
         return self._network is not None
 
@@ -124,7 +133,7 @@ class GraspPlanner:
 
     def plan(self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery):
         """Grasps for ``grid`` (workspace frame) in the world frame, best first, and the
-        time taken in milliseconds."""
+        time taken in milliseconds; the request's threshold defaults to ``default_threshold``."""
         started = time.perf_counter()
         output = self.infer(grid)
         grasps: list[Grasp] = detect_grasps(
@@ -134,6 +143,6 @@ class GraspPlanner:
             output.width,
             voxel_size,
             workspace_pose,
-            detection_config(query),
+            detection_config(query, self.default_threshold),
         )
         return grasps, (time.perf_counter() - started) * 1e3

@@ -37,7 +37,7 @@ class ClutterConfig:
     object_count: int = 5
     rounds: int = 1
     seed: int = 1
-    threshold: float = 0.9
+    threshold: float | None = None  # None: the service's default (the model's operating threshold)
     views: str = "six"  # six | side
     selection: str = "best"  # best | random
     planner: str = "vgn"  # vgn | antipodal (the service's geometric baseline)

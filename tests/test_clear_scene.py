@@ -161,6 +161,6 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
                  "--renderer", "tiny", "--out", str(out)]) == 0  # fmt: skip
     rows = json.loads((out / "table.json").read_text())
     assert [(r["planner"], r["scenario"], r["rounds"]) for r in rows] == [("antipodal", "blocks-5", 1)]
-    assert "| antipodal | best | blocks-5 | 1 |" in (out / "table.md").read_text()
+    assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
     assert "87.6 / 90.1" in (out / "table.md").read_text(), "the paper's Table 1 row stands beside ours"
     assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()

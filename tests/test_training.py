@@ -419,6 +419,13 @@ def test_train_resume_and_serve(dataset: RawDataset, tmp_path: Path, capsys, one
     load_vgn(out)  # strict
     planner = GraspPlanner.from_path(out, device="cpu")
     assert planner.card is not None and planner.card["matches_weights"] and planner.card["epochs"] == 2
+    assert planner.default_threshold == 0.9, "no --threshold: VGN's"
+
+    # Choosing the operating threshold afterwards rewrites the card, not the training.
+    assert main([*base, "--epochs", "2", "--resume", "--threshold", "0.7"]) == 0
+    rewritten = json.loads(out.with_suffix(".card.json").read_text())
+    assert rewritten["threshold"] == 0.7 and rewritten["history"] == card["history"]
+    assert GraspPlanner.from_path(out, device="cpu").default_threshold == 0.7
     assert planner.ready and planner.infer(np.zeros((N, N, N), np.float32)).quality.shape == (N, N, N)
 
 

@@ -46,8 +46,10 @@ def build_card(
     history: list[dict[str, Any]],
     best: dict[str, Any] | None,
     command: str,
+    threshold: float,
 ) -> dict[str, Any]:
-    """The card's content; ``weights`` must already be written (its content id is recorded)."""
+    """The card's content; ``weights`` must already be written (its content id is recorded).
+    ``threshold`` is the operating threshold the service applies to requests that give none."""
     return {
         "format": CARD_FORMAT,
         "model": {
@@ -58,6 +60,7 @@ def build_card(
             "resolution": training.get("resolution"),
             "input": "TSDF grid (N,N,N) indexed [x,y,z], (tsdf+1)/2 where observed, else 0",
         },
+        "threshold": threshold,
         "datasets": datasets,
         "training": training,
         "epochs": len(history),

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import torch
 
+from client.schemas import VGN_DEFAULT_THRESHOLD
 from service.training import report
 from service.training.checkpoint import CheckpointMismatch, checkpoint_path
 from service.training.grids import MAX_DEPTH, RESOLUTION
@@ -116,6 +117,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume", action="store_true", help="continue the run in OUT's checkpoint up to --epochs in total"
     )
     run.add_argument("--fresh", action="store_true", help="start over even though a checkpoint exists")
+    run.add_argument(
+        "--threshold",
+        metavar="T",
+        type=float,
+        default=VGN_DEFAULT_THRESHOLD,
+        help="operating threshold written to the card: the service applies it to grasp requests that "
+        "give none (default %(default)s, VGN's; choose it from the card's validation curve). A rerun with "
+        "--resume and the same --epochs only rewrites weights and card",
+    )
 
     machine = parser.add_argument_group("machine")
     machine.add_argument(
@@ -157,6 +167,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         resolution=args.resolution,
         max_depth=args.max_depth,
         augment=args.augment,
+        threshold=args.threshold,
         resume=args.resume,
         fresh=args.fresh,
         progress=args.progress,

@@ -18,6 +18,7 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
+from client.schemas import VGN_DEFAULT_THRESHOLD
 from service.planner import resolve_device
 from service.training import report
 from service.training.augment import MAX_Z_SHIFT
@@ -68,6 +69,8 @@ class TrainConfig:
     resolution: int = RESOLUTION
     max_depth: float = MAX_DEPTH
     augment: bool = True
+    #: operating threshold written to the card (the service's default for this model)
+    threshold: float = VGN_DEFAULT_THRESHOLD
     resume: bool = False
     fresh: bool = False
     progress: bool = True
@@ -79,6 +82,8 @@ class TrainConfig:
             raise TrainingError("epochs and batch size must be >= 1, workers >= 0, lr > 0")
         if self.resolution % 8:
             raise TrainingError(f"resolution must be a multiple of 8 (VGN's encoder), got {self.resolution}")
+        if not 0.0 <= self.threshold <= 1.0:
+            raise TrainingError(f"--threshold must lie in [0, 1], got {self.threshold}")
         if self.resume and self.fresh:
             raise TrainingError("give --resume or --fresh, not both")
 
@@ -169,6 +174,7 @@ def train(
         history=state.history,
         best=best,
         command=command if command is not None else shlex.join(sys.argv),
+        threshold=config.threshold,
     )
     write_card(card, card_path(config.out))
     return TrainResult(

@@ -53,6 +53,7 @@ def card_summary(weights: Path) -> dict[str, Any] | None:
         "scenes": sum(int(d.get("scenes", 0)) for d in datasets if isinstance(d, dict)),
         "grasps": sum(int(d.get("grasps", 0)) for d in datasets if isinstance(d, dict)),
         "epochs": card.get("epochs"),
+        "threshold": card.get("threshold"),
         "validation": final.get("val"),
         "command": card.get("command"),
         "code_version": card.get("code_version"),
