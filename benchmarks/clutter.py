@@ -69,6 +69,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
+    parser.add_argument(
+        "--torch-threads",
+        type=int,
+        default=1,
+        help="torch threads of the embedded service (default %(default)s: the simulator shares the CPU, "
+        "and on a small CPU more threads than free cores slow the forward down several times)",
+    )
     parser.add_argument("--out", type=Path, default=Path("results/benchmark"))
     return parser.parse_args(argv)
 
@@ -143,7 +150,13 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.ExitStack() as stack:
         url = (
             args.url
-            or stack.enter_context(EmbeddedService(model=args.model, log_path=args.out / "service.log")).url
+            or stack.enter_context(
+                EmbeddedService(
+                    model=args.model,
+                    log_path=args.out / "service.log",
+                    env={"VGN_TORCH_THREADS": str(args.torch_threads)},
+                )
+            ).url
         )
         vgn = stack.enter_context(VGNClient(url, timeout=120.0))
         readiness = vgn.ready()
