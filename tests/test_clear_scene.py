@@ -165,3 +165,6 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
     table = (out / "table.md").read_text()
     assert "87.6 / 90.1" in table and "88.6 / 39.4" in table, "the paper's Table 1 rows stand beside ours"
     assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()
+    (out / "table.md").unlink()
+    assert main(["--report", "--out", str(out)]) == 0, "the table again from the results, running nothing"
+    assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
