@@ -142,7 +142,7 @@ def test_longer_runs(server, tmp_path: Path, scene: str, extra: list[str]):
 
 def test_baseline_planner_needs_no_model(tmp_path: Path, monkeypatch):
     """clear-scene with the service's antipodal baseline runs on an embedded service without weights."""
-    monkeypatch.delenv("VGN_MODEL", raising=False)
+    monkeypatch.setenv("VGN_MODEL", "none")
     results = tmp_path / "baseline"
     run = clear_scene(
         "--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--results", str(results)
