@@ -86,7 +86,7 @@ def test_empty_inputs_give_no_grasps(core):
 
 
 def test_antipodal_over_http_needs_no_model():
-    core = PlanningService.from_settings(Settings(model="none", api_key=None)  # VGN_MODEL=none)
+    core = PlanningService.from_settings(Settings(model="none", api_key=None))  # VGN_MODEL=none
     with TestClient(create_app(core=core)) as http:
         session_id = http.post("/sessions", json={"intrinsics": INTRINSICS.model_dump()}).json()["session_id"]
         for pose in circle_views(6):
