@@ -23,6 +23,7 @@ from sim_worker.metrics import summarize
 from sim_worker.objects import object_set
 from sim_worker.results import ResultsFolder, RoundRecord
 from sim_worker.scenes import generate_scene
+from sim_worker.service_session import fresh_session
 from sim_worker.world import World
 
 MAX_CONSECUTIVE_FAILURES = 2
@@ -129,7 +130,7 @@ class ClutterRemoval:
 
     def _observe(self) -> float:
         """Fuse the views of the current scene into a fresh volume; total integration ms."""
-        self.vgn.reset_session(self.session_id)
+        self.session_id = fresh_session(self.vgn, self.session_id)
         total = 0.0
         for pose in self.views:
             total += self.vgn.add_frame(self.session_id, self.camera.render_depth(pose), pose).integration_ms

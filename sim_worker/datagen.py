@@ -20,6 +20,7 @@ from sim_worker.grasping import execute_grasp
 from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.objects import ObjectSet, object_set
 from sim_worker.scenes import generate_scene, poisson_object_count
+from sim_worker.service_session import fresh_session
 from sim_worker.world import WORKSPACE_SIZE, World
 
 #: Normals must point at least this much upwards: grasps from below the table are pointless.
@@ -126,7 +127,7 @@ class SceneLabeller:
 
     def _observe(self, rng: np.random.Generator) -> SceneViews:
         poses = random_views(rng, int(rng.integers(1, self.config.max_views + 1)))
-        self.vgn.reset_session(self.session_id)
+        self.session_id = fresh_session(self.vgn, self.session_id)
         depths = []
         for pose in poses:
             depth = self.camera.render_depth(pose)

@@ -172,3 +172,22 @@ def test_resume_with_other_generation_settings_is_refused(server, tmp_path: Path
                "--objects", "blocks", "--scenes", "2", "--points", "8", "--out", str(out)]  # fmt: skip
     refused = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert refused.returncode == 2 and "other settings (scene)" in refused.stderr
+
+
+def test_a_session_the_service_forgot_is_reopened(server):
+    """A paused run outlives VGN_SESSION_TTL_S: the next scene opens a new session instead of
+    failing the worker with 404."""
+    from client.http import VGNClient
+    from sim_worker.datagen import DataGenConfig, SceneLabeller
+
+    with VGNClient(server.url) as vgn:
+        labeller = SceneLabeller(vgn, DataGenConfig(scene="packed", objects=("blocks",), points_per_scene=2,
+                                                    renderer="tiny"))  # fmt: skip
+        try:
+            forgotten = labeller.session_id
+            vgn.delete_session(forgotten)  # what expiry does
+            labelled = next(r for r in map(labeller.label_scene, range(4)) if r is not None)
+            assert labeller.session_id != forgotten and len(labelled[1]) == 2
+            assert vgn.session(labeller.session_id).frame_count == len(labelled[0].depth)
+        finally:
+            labeller.close()
