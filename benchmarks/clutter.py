@@ -96,46 +96,47 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
     )  # fmt: skip
 
 
-def run_all(args: argparse.Namespace, vgn: VGNClient) -> list[dict]:
-    rows = []
+def combinations(args: argparse.Namespace):
+    """(planner, selection, scenario, results folder) for every run the arguments ask for."""
     for planner in args.planners:
         for selection in args.selections:
             for scenario in args.scenarios:
-                config = resolve_planner(scenario_config(args, planner, selection, scenario), vgn)
-                results = ResultsFolder(args.out / f"{planner}-{selection}-{scenario}", config.as_json())
-                episode = ClutterRemoval(config, vgn, results)
-                try:
-                    summary = episode.run()
-                finally:
-                    episode.close()
-                rows.append(
-                    {"planner": planner, "selection": selection, "scenario": scenario,
-                     "threshold": config.threshold, "model": config.model, **summary}
-                )  # fmt: skip
-                print(
-                    f"{planner:9s} {selection:6s} {scenario:9s} {format_row(rows[-1])}",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}"
+
+
+def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
+    return {"planner": planner, "selection": selection, "scenario": scenario,
+            "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
+
+
+def run_all(args: argparse.Namespace, vgn: VGNClient) -> list[dict]:
+    rows = []
+    for planner, selection, scenario, folder in combinations(args):
+        config = resolve_planner(scenario_config(args, planner, selection, scenario), vgn)
+        results = ResultsFolder(folder, config.as_json())
+        episode = ClutterRemoval(config, vgn, results)
+        try:
+            summary = episode.run()
+        finally:
+            episode.close()
+        rows.append(table_row(planner, selection, scenario, config.as_json(), summary))
+        print(
+            f"{planner:9s} {selection:6s} {scenario:9s} {format_row(rows[-1])}", file=sys.stderr, flush=True
+        )
     return rows
 
 
 def report_all(args: argparse.Namespace) -> list[dict]:
     """Rows for every (planner, selection, scenario) folder already in ``args.out``."""
     rows = []
-    for planner in args.planners:
-        for selection in args.selections:
-            for scenario in args.scenarios:
-                folder = args.out / f"{planner}-{selection}-{scenario}"
-                if not (folder / "config.json").is_file():
-                    continue
-                config = json.loads((folder / "config.json").read_text())
-                results = ResultsFolder(folder, config)
-                summary = summarize(results.rounds, results.grasps)
-                rows.append(
-                    {"planner": planner, "selection": selection, "scenario": scenario,
-                     "threshold": config["threshold"], "model": config["model"], **summary}
-                )  # fmt: skip
+    for planner, selection, scenario, folder in combinations(args):
+        if not (folder / "config.json").is_file():
+            continue
+        config = json.loads((folder / "config.json").read_text())
+        results = ResultsFolder(folder, config)
+        rows.append(
+            table_row(planner, selection, scenario, config, summarize(results.rounds, results.grasps))
+        )
     return rows
 
 

@@ -23,7 +23,7 @@ from client.schemas import (
 from service.baseline import plan_antipodal
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady
-from service.planner import NO_MODEL_MESSAGE, GraspPlanner, antipodal_config
+from service.planner import NO_MODEL_MESSAGE, GraspPlanner, antipodal_config, resolved_threshold
 from service.sessions import SessionStore
 from service.settings import Settings
 
@@ -162,7 +162,7 @@ class PlanningService:
         else:
             grasps, _ = self.planner.plan(observed, voxel_size, workspace_pose, query)
             model = self.planner.model_id or ""
-            threshold = self.planner.default_threshold if query.threshold is None else query.threshold
+            threshold = resolved_threshold(query, self.planner.default_threshold)
         return GraspResult(
             grasps=grasps,
             planning_ms=round((time.perf_counter() - started) * 1e3, 3),

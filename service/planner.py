@@ -22,13 +22,17 @@ from service.vgn.network import PARAMETER_COUNT, VGN
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 
 
-def detection_config(query: GraspQuery, default_threshold: float = VGN_DEFAULT_THRESHOLD) -> DetectionConfig:
-    """Detection settings of one grasp request (angles arrive in degrees); a request without a
-    threshold gets ``default_threshold`` (the model's operating threshold)."""
+def resolved_threshold(query: GraspQuery, default: float) -> float:
+    """The request's threshold, or ``default`` (the planner's) when it gives none."""
+    return default if query.threshold is None else query.threshold
+
+
+def detection_config(query: GraspQuery, threshold: float) -> DetectionConfig:
+    """Detection settings of one grasp request (angles arrive in degrees) at ``threshold``."""
     crop_min, crop_max = query.crop_box or (None, None)
     angle = query.max_approach_angle
     return DetectionConfig(
-        threshold=default_threshold if query.threshold is None else query.threshold,
+        threshold=threshold,
         nms_size=query.nms_size,
         max_grasps=query.max_grasps,
         crop_min=crop_min,
@@ -41,7 +45,7 @@ def detection_config(query: GraspQuery, default_threshold: float = VGN_DEFAULT_T
 def antipodal_config(query: GraspQuery) -> AntipodalConfig:
     """Settings of the geometric baseline for one grasp request: the same threshold,
     ``max_grasps``, crop (workspace frame) and approach cone as VGN's detection."""
-    detection = detection_config(query, ANTIPODAL_DEFAULT_THRESHOLD)
+    detection = detection_config(query, resolved_threshold(query, ANTIPODAL_DEFAULT_THRESHOLD))
     return AntipodalConfig(
         threshold=detection.threshold,
         max_grasps=detection.max_grasps,
@@ -94,7 +98,8 @@ class GraspPlanner:
         torch_device = resolve_device(device)
         if path is None:
             return cls(None, torch_device, None, None)
-        planner = cls(load_vgn(path), torch_device, weights_id(path), str(path), card_summary(path))
+        model_id = weights_id(path)
+        planner = cls(load_vgn(path), torch_device, model_id, str(path), card_summary(path, model_id))
         planner.warm_up()
         return planner
 
@@ -143,6 +148,6 @@ class GraspPlanner:
             output.width,
             voxel_size,
             workspace_pose,
-            detection_config(query, self.default_threshold),
+            detection_config(query, resolved_threshold(query, self.default_threshold)),
         )
         return grasps, (time.perf_counter() - started) * 1e3

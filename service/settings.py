@@ -57,5 +57,5 @@ class Settings(BaseSettings):
         if self.model == NO_MODEL:
             return None
         if self.model is not None:
-            return Path(self.model)
+            return self.model
         return PACKAGED_MODEL if PACKAGED_MODEL.exists() else None

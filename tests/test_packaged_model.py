@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
 from fastapi.testclient import TestClient
 
 from service.planner import GraspPlanner
@@ -67,13 +66,12 @@ def test_the_packaged_card_belongs_to_the_weights_and_says_how_to_rebuild_them()
         assert step in steps, f"the card's reproduce steps lack {step}"
 
 
-@pytest.mark.parametrize("scene", ["blocks"])
-def test_clear_scene_out_of_the_box(scene: str, tmp_path: Path, monkeypatch):
+def test_clear_scene_out_of_the_box(tmp_path: Path, monkeypatch):
     """The README's first command, short: no --model, no --threshold, an embedded service."""
     monkeypatch.delenv("VGN_MODEL", raising=False)
     monkeypatch.setenv("VGN_TORCH_THREADS", "1")
-    results = tmp_path / scene
-    run = clear_scene("--scene", scene, "--rounds", "2", "--object-count", "3", "--results", str(results))
+    results = tmp_path / "blocks"
+    run = clear_scene("--scene", "blocks", "--rounds", "2", "--object-count", "3", "--results", str(results))
     assert run.returncode == 0, run.stderr
     summary = check_results(results, 2)
     config = json.loads((results / "config.json").read_text())

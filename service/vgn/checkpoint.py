@@ -35,10 +35,11 @@ def card_path(weights: Path) -> Path:
     return weights.with_suffix(".card.json")
 
 
-def card_summary(weights: Path) -> dict[str, Any] | None:
+def card_summary(weights: Path, content_id: str | None = None) -> dict[str, Any] | None:
     """What ``GET /model`` tells about the weights from their card: when and on what they were
     trained, their validation figures and the command that reproduces them. ``None`` without a
-    readable card (weights from elsewhere need none)."""
+    readable card (weights from elsewhere need none). ``content_id``: the weights' id, when the
+    caller already has it (saves hashing the file again)."""
     try:
         card = json.loads(card_path(weights).read_text())
     except (OSError, ValueError):
@@ -49,7 +50,7 @@ def card_summary(weights: Path) -> dict[str, Any] | None:
     final = (card.get("metrics") or {}).get("final") or {}
     return {
         "date": card.get("date"),
-        "matches_weights": (card.get("model") or {}).get("weights_id") == weights_id(weights),
+        "matches_weights": (card.get("model") or {}).get("weights_id") == (content_id or weights_id(weights)),
         "scenes": sum(int(d.get("scenes", 0)) for d in datasets if isinstance(d, dict)),
         "grasps": sum(int(d.get("grasps", 0)) for d in datasets if isinstance(d, dict)),
         "epochs": card.get("epochs"),
