@@ -89,7 +89,19 @@ def _add_generate_data(commands) -> None:
     gen.add_argument("--out", required=True, help="dataset folder (created or resumed)")
     gen.add_argument("--seed", type=int, default=0, help="scene i uses (seed, i); ids are s<seed>-<i>")
     gen.add_argument("--points", type=int, default=120, help="grasp points per scene (default %(default)s)")
-    gen.add_argument("--noise", action="store_true", help="depth noise on the rendered views")
+    gen.add_argument("--noise", action="store_true", help="depth noise on the rendered views of every scene")
+    gen.add_argument(
+        "--noise-fraction",
+        type=float,
+        default=0.0,
+        help="share of scenes with depth noise (default %(default)s)",
+    )
+    gen.add_argument(
+        "--side-view-fraction",
+        type=float,
+        default=0.0,
+        help="share of scenes seen from one side view instead of 1-6 views from above (default %(default)s)",
+    )
 
     clean = commands.add_parser(
         "clean-data",

@@ -18,6 +18,7 @@ from client.dataset import RawDataset
 from client.embedded import EmbeddedService
 from client.files import check_settings
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
+from sim_worker.gripper import GRIPPER_VERSION
 
 
 def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:
@@ -34,8 +35,14 @@ def run(args: argparse.Namespace) -> int:
     if args.workers < 1 or args.scenes < 0:
         print("error: --workers must be >= 1 and --scenes >= 0", file=sys.stderr)
         return 2
-    config = DataGenConfig(scene=args.scene, objects=tuple(args.objects or ()), seed=args.seed,
-                           points_per_scene=args.points, noise=args.noise, renderer=args.renderer)  # fmt: skip
+    try:
+        config = DataGenConfig(scene=args.scene, objects=tuple(args.objects or ()), seed=args.seed,
+                               points_per_scene=args.points, noise=args.noise,
+                               noise_fraction=args.noise_fraction, side_view_fraction=args.side_view_fraction,
+                               renderer=args.renderer)  # fmt: skip
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     out = Path(args.out)
     try:
         dataset = RawDataset(out, dataset_setup())
@@ -44,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     settings = {k: v for k, v in dataclasses.asdict(config).items() if k != "renderer"}
     settings["objects"] = list(settings["objects"])
+    # Labels are what this hand can do: a folder made with another hand is never resumed into.
+    settings["gripper"] = GRIPPER_VERSION
     try:
         check_settings(out / "generation.json", settings)
     except ValueError as error:

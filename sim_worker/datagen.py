@@ -1,8 +1,12 @@
-"""Labelled grasp data through the service (VGN's data generation, DESIGN §4).
+"""Labelled grasp data through the service (VGN's data generation, docs/conventions.md).
 
 Per scene: build a pile or packed scene, render 1-6 random views, post them to a session,
 read the fused grid (to skip scenes where nothing was observed) and the point cloud with
 normals back from the service, and label 120 grasp points by trying 6 yaws each in simulation. The output is VGN's raw layout (client.dataset).
+
+A share of scenes can be observed the way a real sensor sees them (``noise_fraction``: Dex-Net
+depth noise; ``side_view_fraction``: one view from the side instead of 1-6 from above), so a
+model trained on the data survives them. Which scenes do is drawn from the seed alone.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ from sim_worker.world import WORKSPACE_SIZE, World
 
 #: Normals must point at least this much upwards: grasps from below the table are pointless.
 MIN_NORMAL_Z = -0.1
+#: Single side views look from this far off vertical (degrees), like a robot's head camera.
+SIDE_VIEW_TILT_DEG = (45.0, 65.0)
 
 
 @dataclass(frozen=True)
@@ -35,8 +41,22 @@ class DataGenConfig:
     points_per_scene: int = 120
     yaws: int = 6
     max_views: int = 6
-    noise: bool = False
+    noise: bool = False  # every scene noisy (same as noise_fraction=1)
+    noise_fraction: float = 0.0  # share of scenes rendered with depth noise
+    side_view_fraction: float = 0.0  # share of scenes seen from one side view only
     renderer: str = "auto"
+
+    def __post_init__(self) -> None:
+        for name in ("noise_fraction", "side_view_fraction"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+
+    def scene_conditions(self, index: int) -> tuple[bool, bool]:
+        """(noisy, side view) for scene ``index``: drawn from the seed alone, so a scene is
+        the same whichever worker labels it and whatever else changes."""
+        draws = np.random.default_rng([self.seed, index, 7]).random(2)
+        noisy = self.noise or bool(draws[0] < self.noise_fraction)
+        return noisy, bool(draws[1] < self.side_view_fraction)
 
 
 def merged_object_set(names: tuple[str, ...], scene: str) -> ObjectSet:
@@ -88,7 +108,7 @@ class SceneLabeller:
         self.vgn, self.config = vgn, config
         self.world = World(renderer=config.renderer)
         self.gripper = Gripper(self.world)
-        self.camera = Camera(self.world, noise=DepthNoise() if config.noise else None)
+        self.camera = Camera(self.world)
         self.objects = merged_object_set(config.objects, config.scene)
         self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
         self.trial_seconds = 0.0
@@ -109,7 +129,9 @@ class SceneLabeller:
         generate_scene(self.world, self.config.scene, self.objects, poisson_object_count(rng), rng)
         if not self.world.objects:
             return None
-        views = self._observe(rng)
+        noisy, side = self.config.scene_conditions(index)
+        self.camera.noise = DepthNoise() if noisy else None
+        views = self._observe(rng, side)
         if not np.any(self.vgn.tsdf(self.session_id) > 0.5):
             return None  # the fused grid holds no observed surface: nothing to label
         cloud = self.vgn.cloud(self.session_id)
@@ -125,8 +147,11 @@ class SceneLabeller:
             self.world.discard_state(state)
         return views, np.asarray(rows)
 
-    def _observe(self, rng: np.random.Generator) -> SceneViews:
-        poses = random_views(rng, int(rng.integers(1, self.config.max_views + 1)))
+    def _observe(self, rng: np.random.Generator, side: bool = False) -> SceneViews:
+        if side:
+            poses = random_views(rng, 1, tilt_deg=SIDE_VIEW_TILT_DEG)
+        else:
+            poses = random_views(rng, int(rng.integers(1, self.config.max_views + 1)))
         self.session_id = fresh_session(self.vgn, self.session_id)
         depths = []
         for pose in poses:

@@ -1,4 +1,4 @@
-"""Executing one grasp in simulation, VGN's protocol (DESIGN §4)."""
+"""Executing one grasp in simulation, VGN's protocol (docs/conventions.md, "Grasp execution")."""
 
 from __future__ import annotations
 
@@ -20,21 +20,45 @@ HELD_OPENING_FRACTION = 0.1
 
 
 class Outcome(str, Enum):
+    """How an attempt ended. Failures are told apart so a benchmark says *why* grasps fail."""
+
     SUCCESS = "success"
+    #: The open hand at the pre-grasp pose already touched something.
     PREGRASP_COLLISION = "pregrasp_collision"
+    #: The approach touched something and contact was not allowed (labelling): not closed.
     APPROACH_COLLISION = "approach_collision"
+    #: The approach stopped on contact before the grasp pose, the hand closed there and held nothing.
+    APPROACH_CONTACT = "approach_contact"
+    #: The hand reached the grasp pose and closed on nothing.
     NOTHING_HELD = "nothing_held"
+    #: Something was between the fingers after closing but not after the lift.
+    SLIPPED = "slipped"
+
+
+#: The failure classes of a benchmark table, in the order they are shown.
+FAILURE_OUTCOMES = (
+    Outcome.APPROACH_CONTACT,
+    Outcome.NOTHING_HELD,
+    Outcome.SLIPPED,
+    Outcome.PREGRASP_COLLISION,
+    Outcome.APPROACH_COLLISION,
+)
 
 
 @dataclass
 class GraspTrial:
-    """What happened: ``label`` is 1 when an object was lifted and held."""
+    """What happened: ``label`` is 1 when an object was lifted and held.
+
+    When the approach stopped on contact, ``contact_bodies`` are the bodies the hand touched
+    and ``contact_distance`` how far (m) before the grasp pose it stopped."""
 
     outcome: Outcome
     width: float  # finger opening at the end (m); the max opening after a collision
     grasped_body: int | None
     sim_steps: int
     seconds: float
+    contact_bodies: tuple[int, ...] = ()
+    contact_distance: float | None = None
 
     @property
     def label(self) -> int:
@@ -81,31 +105,42 @@ def execute_grasp(
         raise ValueError("fast execution sweeps the approach kinematically: it needs allow_contact=False")
     started, first_step = time.perf_counter(), world.sim_time
 
+    contact: tuple[tuple[int, ...], float] | None = None
+
     def finish(outcome: Outcome, width: float, body: int | None = None) -> GraspTrial:
         gripper.park()
         steps = round((world.sim_time - first_step) / world.config.timestep)
-        return GraspTrial(outcome, width, body, steps, time.perf_counter() - started)
+        bodies, distance = contact if contact else ((), None)
+        return GraspTrial(outcome, width, body, steps, time.perf_counter() - started, bodies, distance)
 
     gripper.reset(translated(grasp_pose, [0.0, 0.0, -PREGRASP_DISTANCE]))
     if gripper.collides_now():
+        contact = (tuple(sorted(gripper.touching())), PREGRASP_DISTANCE)
         return finish(Outcome.PREGRASP_COLLISION, gripper.spec.max_opening)
     if fast:
         stopped_on_contact = not gripper.sweep_is_clear(grasp_pose)
     else:
         stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True)
-    if stopped_on_contact and not allow_contact:
-        return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
+    if stopped_on_contact:
+        distance = float(np.linalg.norm(grasp_pose[:3, 3] - gripper.position()))
+        contact = (tuple(sorted(gripper.touching())), round(distance, 4))
+        if not allow_contact:
+            return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
     empty = HELD_OPENING_FRACTION * gripper.spec.max_opening
     gripper.close(stop_when_empty=empty if fast else None)
-    if fast and gripper.opening() < empty:
-        return finish(Outcome.NOTHING_HELD, gripper.opening())
+    closed_on_something = gripper.opening() > empty and bool(
+        gripper.bodies_between_fingers() & set(world.objects)
+    )
+    if not closed_on_something:
+        missed = Outcome.APPROACH_CONTACT if stopped_on_contact else Outcome.NOTHING_HELD
+        return finish(missed, gripper.opening())
     gripper.move_to(
         retreat_pose(grasp_pose), abort_on_contact=False, abort_below_opening=empty if fast else None
     )
     width = gripper.opening()
     held = gripper.bodies_between_fingers() & set(world.objects)
     if width <= empty or not held:
-        return finish(Outcome.NOTHING_HELD, width)
+        return finish(Outcome.SLIPPED, width)
     body = min(held)
     if remove_grasped:
         world.remove_object(body)

@@ -1,4 +1,4 @@
-"""A free-floating parallel-jaw gripper whose base frame is the grasp frame (DESIGN §2)."""
+"""A free-floating parallel-jaw gripper whose base frame is the grasp frame (docs/conventions.md)."""
 
 from __future__ import annotations
 
@@ -12,18 +12,25 @@ from client.geometry import pose_from_matrix
 from sim_worker.world import World
 
 GRIPPER_URDF = Path(__file__).parent / "assets" / "gripper.urdf"
+#: Which hand made a label. Datasets record it, and data of different versions is never mixed:
+#: a label says what *this* hand can do. ``box-v1`` was the earlier 12 mm box-finger hand.
+GRIPPER_VERSION = "franka-v2"
 #: Where the gripper waits between grasps: far outside the workspace and every camera's view.
 PARKED_POSITION = (0.15, 0.15, 10.0)
 
 
 @dataclass(frozen=True)
 class GripperSpec:
-    """Franka-hand-like parameters, as VGN's simulation (DESIGN §4)."""
+    """Franka-hand parameters; forces, friction and motion as in VGN's simulation."""
 
     max_opening: float = 0.08
     finger_depth: float = 0.05
     finger_force: float = 20.0  # N per finger while closing
     finger_friction: float = 1.0
+    #: Rubber pads: a compliant contact (N/m, N·s/m) instead of a rigid one, so a pad yields a
+    #: few millimetres under the closing force and grips with an area rather than a point.
+    pad_contact_stiffness: float = 3.0e4
+    pad_contact_damping: float = 1.0e2
     hold_force: float = 300.0  # N of the constraint that carries the hand
     close_duration: float = 0.5  # s
     step_length: float = 0.002  # m per motion step
@@ -41,7 +48,13 @@ class Gripper:
         names = {p.getJointInfo(self.body, j)[1].decode(): j for j in range(p.getNumJoints(self.body))}
         self.fingers = (names["left_finger_joint"], names["right_finger_joint"])
         for finger in self.fingers:
-            p.changeDynamics(self.body, finger, lateralFriction=spec.finger_friction)
+            p.changeDynamics(
+                self.body,
+                finger,
+                lateralFriction=spec.finger_friction,
+                contactStiffness=spec.pad_contact_stiffness,
+                contactDamping=spec.pad_contact_damping,
+            )
         gear = p.createConstraint(
             self.body,
             self.fingers[0],
@@ -99,6 +112,10 @@ class Gripper:
     def opening(self) -> float:
         """Current distance between the inner finger faces, metres."""
         return float(sum(self.world.p.getJointState(self.body, f)[0] for f in self.fingers))
+
+    def position(self) -> np.ndarray:
+        """Where the grasp frame's origin is now (world, metres)."""
+        return np.asarray(self.world.p.getBasePositionAndOrientation(self.body)[0])
 
     def touching(self) -> set[int]:
         """Bodies in contact with the hand or fingers (after ``performCollisionDetection``)."""
