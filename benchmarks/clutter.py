@@ -25,7 +25,7 @@ from client.files import write_atomically
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
-from sim_worker.metrics import summarize
+from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
 
 #: VGN paper, Table 1, VGN at threshold 0.9 (random selection): (success %, cleared %).
@@ -69,6 +69,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
+    parser.add_argument("--noise", action="store_true", help="depth noise on every view (a real sensor)")
+    parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     parser.add_argument(
         "--torch-threads",
@@ -92,7 +94,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
     return ClutterConfig(
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
         threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection,
-        planner=planner, renderer=args.renderer,
+        planner=planner, renderer=args.renderer, noise=args.noise, views=args.views,
     )  # fmt: skip
 
 
@@ -101,7 +103,8 @@ def combinations(args: argparse.Namespace):
     for planner in args.planners:
         for selection in args.selections:
             for scenario in args.scenarios:
-                yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}"
+                suffix = ("-noise" if args.noise else "") + ("-side" if args.views == "side" else "")
+                yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}{suffix}"
 
 
 def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
@@ -149,12 +152,20 @@ def format_row(row: dict) -> str:
     return f"{row['rounds']:4d} rounds  success {pct('success_rate')}  cleared {pct('percent_cleared')}  planning p50 {planning:.0f} ms"
 
 
+def failures_cell(row: dict) -> str:
+    """Failed attempts by class, e.g. ``12 / 3 / 1 / 0``."""
+    outcomes = row.get("outcomes") or {}
+    return " / ".join(str(outcomes.get(key, 0)) for key, _ in FAILURE_CLASSES)
+
+
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     lines = [
-        f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}",
+        f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
+        f"{args.views} view(s){', depth noise' if args.noise else ''}",
         "",
-        "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) | planning p50 ms | paper VGN ε=0.9 | paper GPD |",
-        "| --- | --- | ---: | --- | ---: | --- | --- | ---: | --- | --- |",
+        "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
+        "| failures: approach contact / nothing held / slipped / collision | planning p50 ms | paper VGN ε=0.9 | paper GPD |",
+        "| --- | --- | ---: | --- | ---: | --- | --- | --- | ---: | --- | --- |",
     ]
     for row in rows:
         paper, gpd = PAPER_TABLE_1.get(row["scenario"]), PAPER_GPD.get(row["scenario"])
@@ -164,6 +175,7 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
             f"| {row['planner']} | {row['selection']} | {row['threshold']} | {row['scenario']} | {row['rounds']} | "
             f"{'-' if success is None else f'{success:.1f}'} ({row['success_rate_ci95'][0]:.1f}-{row['success_rate_ci95'][1]:.1f}) | "
             f"{'-' if cleared is None else f'{cleared:.1f}'} ({row['percent_cleared_ci95'][0]:.1f}-{row['percent_cleared_ci95'][1]:.1f}) | "
+            f"{failures_cell(row)} | "
             f"{'-' if planning is None else f'{planning:.0f}'} | {f'{paper[0]} / {paper[1]}' if paper else '-'} | "
             f"{f'{gpd[0]} / {gpd[1]}' if gpd else '-'} |"
         )  # fmt: skip

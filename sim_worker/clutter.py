@@ -117,11 +117,11 @@ class ClutterRemoval:
             record.attempts += 1
             record.successes += trial.label
             failures = 0 if trial.label else failures + 1
-            record.grasps.append(
-                _grasp_row(
-                    record, grasp, trial, integration_ms, answer.planning_ms, client_ms, len(answer.grasps)
-                )
+            row = _grasp_row(
+                record, grasp, trial, integration_ms, answer.planning_ms, client_ms, len(answer.grasps)
             )
+            row["contact"] = "+".join(self._body_name(body) for body in trial.contact_bodies)
+            record.grasps.append(row)
             self.world.wait_for_rest()
             self.world.remove_objects_outside()
         record.cleared = record.successes
@@ -135,6 +135,13 @@ class ClutterRemoval:
         for pose in self.views:
             total += self.vgn.add_frame(self.session_id, self.camera.render_depth(pose), pose).integration_ms
         return total
+
+    def _body_name(self, body: int) -> str:
+        """What the hand touched, for the results: ``table`` or the object's file name."""
+        if body == self.world.table:
+            return "table"
+        found = self.world.objects.get(body)
+        return found.urdf.stem if found is not None and found.urdf is not None else f"body{body}"
 
     def _select(self, grasps: list[Grasp], rng: np.random.Generator) -> Grasp:
         if self.config.selection == "random":
@@ -173,6 +180,7 @@ def _grasp_row(record, grasp: Grasp, trial, integration_ms, planning_ms, client_
         "planning_time": round(planning_ms, 3),
         "client_planning_time": round(client_ms, 3),
         "outcome": trial.outcome.value,
+        "contact_distance": "" if trial.contact_distance is None else trial.contact_distance,
         "grasp_count": count,
         "trial_time": round(trial.seconds, 4),
     }

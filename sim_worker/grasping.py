@@ -122,8 +122,8 @@ def execute_grasp(
     else:
         stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True)
     if stopped_on_contact:
-        distance = float(np.linalg.norm(grasp_pose[:3, 3] - gripper.position()))
-        contact = (tuple(sorted(gripper.touching())), round(distance, 4))
+        distance = float(np.linalg.norm(grasp_pose[:3, 3] - gripper.last_contact_position))
+        contact = (tuple(sorted(gripper.last_contact)), round(distance, 4))
         if not allow_contact:
             return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
     empty = HELD_OPENING_FRACTION * gripper.spec.max_opening

@@ -15,6 +15,8 @@ GRIPPER_URDF = Path(__file__).parent / "assets" / "gripper.urdf"
 #: Which hand made a label. Datasets record it, and data of different versions is never mixed:
 #: a label says what *this* hand can do. ``box-v1`` was the earlier 12 mm box-finger hand.
 GRIPPER_VERSION = "franka-v2"
+#: How far (in 2 mm waypoints) a contact-stopped approach may back off to stop pressing.
+MAX_BACK_OFF_STEPS = 3
 #: Where the gripper waits between grasps: far outside the workspace and every camera's view.
 PARKED_POSITION = (0.15, 0.15, 10.0)
 
@@ -69,6 +71,9 @@ class Gripper:
         self.constraint = p.createConstraint(
             self.body, -1, -1, -1, pybullet.JOINT_FIXED, [0, 0, 0], [0, 0, 0], PARKED_POSITION
         )
+        #: What the last approach that stopped on contact touched (body ids).
+        self.last_contact: set[int] = set()
+        self.last_contact_position = np.zeros(3)
         self.steps_per_motion = max(1, round(spec.step_length / spec.speed / world.config.timestep))
         self.park()
 
@@ -148,10 +153,23 @@ class Gripper:
             self._hold(start + (goal - start) * n / count, orientation)
             self.world.step(self.steps_per_motion)
             if abort_on_contact and self.touching():
+                self.last_contact, self.last_contact_position = self.touching(), self.position()
+                self._back_off(start, goal, n, count, orientation)
                 return True
             if abort_below_opening is not None and self.opening() < abort_below_opening:
                 return True
         return False
+
+    def _back_off(self, start: np.ndarray, goal: np.ndarray, n: int, count: int, orientation) -> None:
+        """A guarded move's stop: the arm backs off along its path, a waypoint at a time and at
+        most ``MAX_BACK_OFF_STEPS``, until the hand no longer presses on anything, and holds
+        there, as a robot's contact-triggered stop does. Pressing on with the full holding
+        force instead pins the fingers by friction, so they never close."""
+        for back in range(1, MAX_BACK_OFF_STEPS + 1):
+            self._hold(start + (goal - start) * max(0, n - back) / count, orientation)
+            self.world.step(self.steps_per_motion)
+            if not self.touching():
+                return
 
     def sweep_is_clear(self, target: np.ndarray) -> bool:
         """Teleport the hand along the straight line to ``target`` in 2 mm steps without
@@ -167,6 +185,7 @@ class Gripper:
             pose[:3, 3] = start[:3, 3] + (goal - start[:3, 3]) * n / count
             self.reset(pose, opening)
             if self.collides_now():
+                self.last_contact, self.last_contact_position = self.touching(), self.position()
                 return False
         return True
 

@@ -8,6 +8,26 @@ from statistics import mean, median
 from typing import Any
 
 Z_95 = 1.959964
+#: Failure classes shown in summaries, as (outcome value, short label); "collision" joins the
+#: pre-grasp and (labelling-only) approach collisions.
+FAILURE_CLASSES = (
+    ("approach_contact", "approach contact"),
+    ("nothing_held", "nothing held"),
+    ("slipped", "slipped"),
+    ("collision", "collision"),
+)
+
+
+def outcome_counts(grasps: Iterable[Mapping[str, Any]]) -> dict[str, int]:
+    """Attempts per outcome: success and each failure class (older results without the newer
+    outcomes simply count zero there)."""
+    counts = {"success": 0, **{key: 0 for key, _ in FAILURE_CLASSES}}
+    for row in grasps:
+        outcome = row.get("outcome") or ""
+        key = "collision" if outcome.endswith("collision") else outcome
+        if key in counts:
+            counts[key] += 1
+    return counts
 
 
 def wilson_interval(successes: int, trials: int) -> tuple[float, float]:
@@ -48,11 +68,18 @@ def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) 
         "objects_cleared": cleared,
         "percent_cleared": round(100 * cleared / placed, 1) if placed else None,
         "percent_cleared_ci95": wilson_interval(cleared, placed),
+        "outcomes": outcome_counts(grasps),
         "planning_ms": stats(planning),
         "client_planning_ms": stats(client_planning),
         "integration_ms": stats(integration),
         "round_seconds": stats(round_seconds),
     }
+
+
+def failure_breakdown(summary: Mapping[str, Any]) -> str:
+    """``approach contact 3, nothing held 1, slipped 0, collision 0``."""
+    outcomes = summary.get("outcomes") or {}
+    return ", ".join(f"{label} {outcomes.get(key, 0)}" for key, label in FAILURE_CLASSES)
 
 
 def summary_table(summary: Mapping[str, Any]) -> str:
@@ -75,6 +102,7 @@ def summary_table(summary: Mapping[str, Any]) -> str:
             "percent cleared",
             pct("percent_cleared") + f"  [{summary['objects_cleared']}/{summary['objects_placed']}]",
         ),
+        ("failures", failure_breakdown(summary)),
         ("planning (service)", ms("planning_ms")),
         ("planning (client)", ms("client_planning_ms")),
         ("integration / attempt", ms("integration_ms")),

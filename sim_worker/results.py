@@ -42,6 +42,9 @@ GRASP_COLUMNS = [
     "outcome",
     "grasp_count",
     "trial_time",
+    # where the approach stopped on contact: what it touched, how far (m) before the grasp pose
+    "contact",
+    "contact_distance",
 ]
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from sim_worker.metrics import summarize, wilson_interval
+from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 
 VGN_COLUMNS = ["round_id", "scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "score", "label",
@@ -69,6 +69,16 @@ def test_metrics_follow_the_paper():
     assert low < 62.5 < high
 
 
+def test_outcomes_are_counted_by_failure_class():
+    grasps = [{"outcome": o} for o in
+              ["success", "approach_contact", "approach_contact", "nothing_held", "slipped", "pregrasp_collision"]]  # fmt: skip
+    counts = summarize([], grasps)["outcomes"]
+    assert counts == {"success": 1, "approach_contact": 2, "nothing_held": 1, "slipped": 1, "collision": 1}
+    assert failure_breakdown({"outcomes": counts}) == (
+        "approach contact 2, nothing held 1, slipped 1, collision 1"
+    )
+
+
 def test_wilson_interval_known_values():
     assert wilson_interval(0, 0) == (0.0, 0.0)
     assert wilson_interval(50, 100) == (40.4, 59.6)
@@ -83,6 +93,13 @@ def check_results(results: Path, rounds: int) -> dict:
     assert len(round_rows) == summary["rounds"] == rounds
     assert len(grasp_rows) == summary["attempts"] == sum(int(r["attempts"]) for r in round_rows)
     assert summary["successes"] == sum(int(g["label"]) for g in grasp_rows)
+    outcomes = summary["outcomes"]
+    assert sum(outcomes.values()) == summary["attempts"], "every attempt falls in one outcome class"
+    assert outcomes["success"] == summary["successes"]
+    for g in grasp_rows:  # a contact stop names what it touched and how far before the grasp pose
+        assert bool(g["contact"]) == (g["contact_distance"] != "")
+        if g["outcome"] == "approach_contact":
+            assert g["contact"] and 0 <= float(g["contact_distance"]) <= 0.05
     for r in round_rows:  # each round ends: table clear, no grasp found, or 2 failures in a row
         labels = [int(g["label"]) for g in grasp_rows if g["round_id"] == r["round_id"]]
         assert "0,0" not in ",".join(map(str, labels[:-1])), "no attempt after two failures in a row"
@@ -163,6 +180,12 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
     assert [(r["planner"], r["scenario"], r["rounds"]) for r in rows] == [("antipodal", "blocks-5", 1)]
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
     table = (out / "table.md").read_text()
+    assert "approach contact / nothing held / slipped / collision" in table
+    outcomes = rows[0]["outcomes"]
+    failures = " / ".join(
+        str(outcomes[k]) for k in ("approach_contact", "nothing_held", "slipped", "collision")
+    )
+    assert f"| {failures} |" in table, "the failure breakdown is in the row"
     assert "87.6 / 90.1" in table and "88.6 / 39.4" in table, "the paper's Table 1 rows stand beside ours"
     assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()
     (out / "table.md").unlink()

@@ -128,3 +128,28 @@ def test_fast_labelling_gives_the_same_label(world, position, rotation):
     assert fast.sim_steps <= slow.sim_steps
     if slow.label:
         assert fast.width == pytest.approx(slow.width, abs=1e-3)
+
+
+def test_an_approach_stopped_by_the_table_backs_off_closes_and_records_the_contact(world):
+    add_box(world)
+    # Fingertips would end 4 cm inside the table: the approach stops on it, 4 cm early.
+    trial = execute_grasp(world, Gripper(world), grasp([0.15, 0.15, 0.06], DOWN), allow_contact=True)
+    assert trial.contact_bodies == (world.table,)
+    assert trial.contact_distance == pytest.approx(0.04, abs=0.003)
+    assert trial.outcome is Outcome.SUCCESS, "a guarded stop does not pin the fingers to the table"
+
+
+def test_closing_on_nothing_after_a_contact_stop_is_approach_contact(world):
+    body = add_box(world, half_extents=(0.06, 0.06, 0.02))  # 12 cm square slab, top at z = 0.09
+    # The pads land on the slab's top 3 cm before the grasp pose and close on nothing.
+    trial = execute_grasp(world, Gripper(world), grasp([0.15, 0.15, 0.11], DOWN), allow_contact=True)
+    assert trial.outcome is Outcome.APPROACH_CONTACT and trial.label == 0
+    assert trial.contact_bodies == (body,)
+    assert trial.contact_distance == pytest.approx(0.03, abs=0.003)
+
+
+def test_an_object_too_heavy_to_lift_slips(world):
+    add_box(world, mass=20.0)  # 196 N of weight against 2 x 20 N of grip with friction 1
+    trial = execute_grasp(world, Gripper(world), grasp([0.15, 0.15, 0.12], DOWN))
+    assert trial.outcome is Outcome.SLIPPED and trial.label == 0
+    assert trial.contact_bodies == () and trial.contact_distance is None
