@@ -26,7 +26,7 @@ from service.training.dataset import Batch, Sample, collate, load_scenes, prepar
 from service.training.grids import cache_key
 from service.training.labels import LabelSet
 from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
-from service.training.metrics import MetricAccumulator, rotation_error_deg
+from service.training.metrics import MetricAccumulator, choose_threshold, rotation_error_deg
 from service.training.quaternions import flipped, multiply
 from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn
 from service.vgn.network import VGN
@@ -360,9 +360,36 @@ def test_metrics_count_at_threshold_and_measure_errors():
     assert result["rotation_error_deg"] == pytest.approx(10.0, abs=1e-3)
     assert result["width_error_mm"] == pytest.approx(2 * VOXEL * 1e3)
     assert float(rotation_error_deg(flipped(batch.quaternion), batch.quaternion).max()) < 0.1
-    assert result["curve"]["0.5"] == {"precision": pytest.approx(2 / 3), "recall": 1.0}
-    assert result["curve"]["0.9"] == {"precision": 0.5, "recall": 0.5}
+    # On this mix (2 positives, 1 negative) and as it would be on balanced classes (TPR / (TPR + FPR)).
+    assert result["curve"]["0.50"] == {
+        "precision": pytest.approx(2 / 3),
+        "recall": 1.0,
+        "balanced_precision": 0.5,
+    }
+    assert result["curve"]["0.90"] == {
+        "precision": 0.5,
+        "recall": 0.5,
+        "balanced_precision": pytest.approx(1 / 3),
+    }
+    losses = per_label_loss(predictions, batch)
+    assert result["balanced_loss"] == pytest.approx(0.5 * (float(losses[:2].mean()) + float(losses[2])))
     assert MetricAccumulator().result()["precision"] is None
+
+
+def test_the_operating_threshold_is_chosen_on_the_real_mix():
+    curve = {
+        "0.50": {"precision": 0.40, "recall": 0.9, "balanced_precision": 0.85},
+        "0.80": {"precision": 0.62, "recall": 0.5, "balanced_precision": 0.93},
+        "0.90": {"precision": 0.81, "recall": 0.2, "balanced_precision": 0.97},
+        "0.95": {"precision": None, "recall": 0.0, "balanced_precision": None},
+    }
+    chosen = choose_threshold(curve, target_precision=0.6)
+    assert chosen["threshold"] == 0.8 and chosen["target_reached"], "lowest threshold with precision >= 0.6"
+    assert choose_threshold(curve, 0.8)["threshold"] == 0.9, "balanced precision does not count"
+    fallback = choose_threshold(curve, 0.99)
+    assert fallback["threshold"] == 0.9 and not fallback["target_reached"], (
+        "the most precise when none reaches"
+    )
 
 
 # The whole run ------------------------------------------------------------------------------
@@ -419,7 +446,13 @@ def test_train_resume_and_serve(dataset: RawDataset, tmp_path: Path, capsys, one
     load_vgn(out)  # strict
     planner = GraspPlanner.from_path(out, device="cpu")
     assert planner.card is not None and planner.card["matches_weights"] and planner.card["epochs"] == 2
-    assert planner.default_threshold == 0.9, "no --threshold: VGN's"
+    choice = (
+        planner.card["threshold_choice"] if "threshold_choice" in planner.card else card["threshold_choice"]
+    )
+    assert planner.default_threshold == card["threshold"] == choice["threshold"], "no --threshold: auto"
+    assert "unbalanced" in choice["rule"] or "could not choose" in choice["rule"]
+    assert card["training"]["copies_per_epoch"] == 1 and card["history"][-1]["steps"] >= 2
+    assert out.with_suffix(".curves.png").is_file() and card["learning_curves"] == "vgn.curves.png"
 
     # Choosing the operating threshold afterwards rewrites the card, not the training.
     assert main([*base, "--epochs", "2", "--resume", "--threshold", "0.7"]) == 0

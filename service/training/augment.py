@@ -1,6 +1,6 @@
 """VGN's augmentations, applied to a grid and its labels together so they stay aligned.
 
-Grids are indexed [x, y, z] (DESIGN §2). A z-rotation by k × 90° about the workspace centre
+Grids are indexed [x, y, z] (docs/conventions.md). A z-rotation by k × 90° about the workspace centre
 is ``torch.rot90`` over the x, y axes: grid *cells* describe the space around their centres
 (i + 0.5) × voxel, so a quarter turn maps cell (i, j) to (N-1-j, i). A grasp label sits at
 i × voxel (its corner), and the same physical turn takes it to index (N-j, i): labels and
@@ -63,3 +63,36 @@ def random_augment(
     """A uniformly random quarter-turn about z, then a shift in U{-max_shift..max_shift}."""
     grid, labels = rotate_z(grid, labels, int(rng.integers(4)))
     return shift_z(grid, labels, int(rng.integers(-max_shift, max_shift + 1)))
+
+
+def height_range(labels: LabelSet, n: int) -> tuple[int, int]:
+    """The z shifts (voxels, inclusive) that keep every label inside an ``n``-voxel grid."""
+    if not len(labels):
+        return 0, 0
+    z = labels.voxel[:, 2]
+    return -int(z.min()), n - 1 - int(z.max())
+
+
+def random_placement(
+    grid: torch.Tensor, labels: LabelSet, rng: np.random.Generator
+) -> tuple[torch.Tensor, LabelSet]:
+    """VGN's augmentation for whole scenes: a random quarter-turn about z, then the scene
+    placed at a random height, uniform over every shift that keeps all its labels in the
+    grid. The table then appears anywhere from the grid's floor to high up, so the network
+    cannot learn "grasps live just above z = 0.05 m" and score empty space by height alone."""
+    grid, labels = rotate_z(grid, labels, int(rng.integers(4)))
+    low, high = height_range(labels, grid.shape[2])
+    return shift_z(grid, labels, int(rng.integers(low, high + 1)))
+
+
+def balanced_subset(labels: LabelSet, rng: np.random.Generator) -> LabelSet:
+    """Every positive and as many randomly drawn negatives (at least one): the raw labels are
+    mostly failures, and VGN trains on balanced classes. A new draw each step means every
+    negative is seen over the epochs."""
+    positive = labels.label > 0.5
+    negatives = torch.nonzero(~positive).flatten()
+    count = min(len(negatives), max(int(positive.sum()), 1))
+    chosen = negatives[torch.from_numpy(rng.permutation(len(negatives))[:count])]
+    keep = positive.clone()
+    keep[chosen] = True
+    return labels.select(keep)

@@ -11,7 +11,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from client.files import write_atomically
+from client.files import atomic_writer, write_atomically
 from service.vgn.checkpoint import weights_id
 from service.vgn.network import PARAMETER_COUNT
 
@@ -71,6 +71,39 @@ def build_card(
         "working_directory": os.getcwd(),
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def write_learning_curves(history: list[dict[str, Any]], path: Path) -> Path | None:
+    """A PNG of the run: training and validation loss per epoch against optimiser steps, and
+    validation precision/recall at 0.9. ``None`` (nothing written) without matplotlib."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    steps = [entry.get("steps", entry["epoch"]) for entry in history]
+    figure, (losses, quality) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    losses.plot(steps, [e["train"].get("loss") for e in history], "o-", label="train loss")
+    if history and history[0].get("val"):
+        val = [e["val"] for e in history]
+        losses.plot(steps, [v.get("loss") for v in val], "s-", label="val loss (all labels)")
+        losses.plot(steps, [v.get("balanced_loss") for v in val], "^-", label="val loss (balanced)")
+        quality.plot(steps, [v.get("precision") for v in val], "o-", label="val precision @0.9")
+        quality.plot(steps, [v.get("recall") for v in val], "s-", label="val recall @0.9")
+        quality.set_ylim(0, 1)
+        quality.legend()
+    losses.set_xlabel("optimiser steps")
+    quality.set_xlabel("optimiser steps")
+    losses.set_title("loss")
+    quality.set_title("validation (unbalanced labels)")
+    losses.legend()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_writer(path) as stream:
+        figure.savefig(stream, format="png", dpi=80)
+    plt.close(figure)
+    return path
 
 
 def write_card(card: dict[str, Any], path: Path) -> None:

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import torch
 
-from client.schemas import VGN_DEFAULT_THRESHOLD
 from service.training import report
 from service.training.checkpoint import CheckpointMismatch, checkpoint_path
 from service.training.grids import MAX_DEPTH, RESOLUTION
@@ -20,10 +19,12 @@ Train the Volumetric Grasping Network on one or more raw VGN datasets (the layou
 `setup.json`, `grasps.csv` and `scenes/*.npz` make up; the sim worker writes it, and public
 VGN/GIGA raw datasets use it too).
 
-Each scene's depth images are fused into a 40^3 TSDF grid with the service's own TSDF code
-and cached (by default in <data>/.cache/). One forward pass per scene scores every labelled
-voxel of it with VGN's loss; training augments with z turns of 90 degrees and z shifts.
-Scenes are split into training and validation by scene, fixed by --seed.
+A --data folder is a raw dataset or a packed shard folder (vgn-pack-data; the repository's
+data/). Raw scenes' depth images are fused into a 40^3 TSDF grid with the service's own TSDF
+code and cached (by default in <data>/.cache/). One forward pass per scene draw scores its
+labels with VGN's loss; each draw is turned by a multiple of 90 degrees about z, placed at a
+random height, and keeps its positives and as many random negatives. Scenes are split into
+training and validation by scene, fixed by --seed; validation uses every label.
 
 Writes OUT (.safetensors weights for the service: VGN_MODEL=OUT), OUT's .card.json (model
 card: data, settings, metrics, command, code version) and OUT's .ckpt.pt (the training
@@ -32,7 +33,8 @@ state after each epoch, for --resume).
 
 EPILOG = """\
 examples:
-  vgn-train --data data/pile --data data/packed --epochs 10 --out models/vgn.safetensors
+  vgn-train --data data --epochs 40 --copies 4 --patience 6 --out models/vgn.safetensors
+  vgn-train --data raw/pile --data raw/packed --epochs 10 --out models/vgn.safetensors
   vgn-train --data data/pile --epochs 20 --out models/vgn.safetensors --resume   # 10 more epochs
   VGN_MODEL=models/vgn.safetensors uvicorn service.app:app                      # serve them
 """
@@ -83,10 +85,27 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"ignore depth readings beyond this many metres (default {MAX_DEPTH}, as the service)",
     )
     data.add_argument(
-        "--no-augment",
-        dest="augment",
+        "--augment",
+        choices=["height", "shift", "none"],
+        default="height",
+        help="height (default, VGN's): quarter-turns about z and the scene at a random height; "
+        "shift: quarter-turns and z shifts of up to 4 voxels; none",
+    )
+    data.add_argument(
+        "--no-augment", dest="augment", action="store_const", const="none", help="same as --augment none"
+    )
+    data.add_argument(
+        "--copies",
+        metavar="K",
+        type=int,
+        default=1,
+        help="draws of each training scene per epoch, each augmented and label-subsampled anew (default 1)",
+    )
+    data.add_argument(
+        "--no-balance",
+        dest="balance",
         action="store_false",
-        help="turn off the z-rotation and z-shift augmentations",
+        help="train on every label of a scene (default: each draw keeps the positives and as many negatives)",
     )
 
     run = parser.add_argument_group("training")
@@ -118,13 +137,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--fresh", action="store_true", help="start over even though a checkpoint exists")
     run.add_argument(
+        "--patience",
+        metavar="P",
+        type=int,
+        default=None,
+        help="stop after P epochs without a lower balanced validation loss (default: run all epochs); "
+        "the weights written are always the best epoch's",
+    )
+    run.add_argument(
         "--threshold",
         metavar="T",
-        type=float,
-        default=VGN_DEFAULT_THRESHOLD,
+        type=_threshold,
+        default=None,
         help="operating threshold written to the card: the service applies it to grasp requests that "
-        "give none (default %(default)s, VGN's; choose it from the card's validation curve). A rerun with "
-        "--resume and the same --epochs only rewrites weights and card",
+        "give none. Default 'auto': the lowest threshold whose precision on the validation scenes' labels "
+        "(their real, unbalanced mix) reaches --target-precision. A rerun with --resume and the same "
+        "--epochs only rewrites the card",
+    )
+    run.add_argument(
+        "--target-precision",
+        metavar="P",
+        type=float,
+        default=0.8,
+        help="precision that --threshold auto aims for (default %(default)s)",
     )
 
     machine = parser.add_argument_group("machine")
@@ -152,6 +187,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _threshold(text: str) -> float | None:
+    """A threshold in [0, 1], or 'auto' (None)."""
+    if text == "auto":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1] or 'auto', got {text!r}") from None
+
+
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
     return TrainConfig(
         data=args.data,
@@ -166,8 +211,12 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         workers=args.workers,
         resolution=args.resolution,
         max_depth=args.max_depth,
-        augment=args.augment,
+        augment=None if args.augment == "none" else args.augment,
+        copies=args.copies,
+        balance=args.balance,
+        patience=args.patience,
         threshold=args.threshold,
+        target_precision=args.target_precision,
         resume=args.resume,
         fresh=args.fresh,
         progress=args.progress,
@@ -198,15 +247,15 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
-    config = config_from_args(args)
     command = ["vgn-train", *(sys.argv[1:] if argv is None else argv)]
     try:
+        config = config_from_args(args)
         result = train(config, command=shlex.join(command))
     except (TrainingError, CheckpointMismatch, FileNotFoundError, ValueError) as error:
         print(f"vgn-train: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        path = checkpoint_path(config.out)
+        path = checkpoint_path(args.out)
         hint = f"continue with --resume (checkpoint: {path})" if path.exists() else "no epoch had finished"
         print(f"\nvgn-train: interrupted; {hint}", file=sys.stderr)
         return 130

@@ -19,9 +19,26 @@ from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
 from client.dataset import RawDataset
-from service.training.augment import random_augment
+from service.training.augment import balanced_subset, random_augment, random_placement
 from service.training.grids import GridSource, cache_dir, cache_key, ensure_cached
 from service.training.labels import LabelSet
+from service.training.shards import ShardFolder, dequantize
+
+
+@dataclass(frozen=True, eq=False)
+class PackedGrid:
+    """A scene's grid from a packed shard: kept quantised in memory, dequantised on use."""
+
+    quantised: np.ndarray
+
+    def load(self) -> np.ndarray:
+        return dequantize(self.quantised)
+
+    def is_cached(self) -> bool:
+        return True
+
+    def build(self) -> np.ndarray:
+        return self.load()
 
 
 @dataclass(frozen=True)
@@ -30,7 +47,7 @@ class Scene:
 
     dataset: int
     scene_id: str
-    source: GridSource
+    source: GridSource | PackedGrid
     labels: LabelSet
     voxel_size: float
 
@@ -64,11 +81,18 @@ def load_scenes(
 ) -> tuple[list[Scene], list[DatasetSummary]]:
     """Scenes with at least one label inside the grid, in a stable order, and per-dataset counts.
 
-    Raises ``FileNotFoundError`` for a folder that is not a raw dataset.
+    A folder is either a raw dataset or a packed shard folder (``manifest.json``; its grids were
+    fused when packed, at the manifest's resolution and depth cut-off). Raises
+    ``FileNotFoundError`` for a folder that is neither.
     """
     scenes: list[Scene] = []
     summaries: list[DatasetSummary] = []
     for index, data_dir in enumerate(data_dirs):
+        if ShardFolder(Path(data_dir)).exists():
+            packed, summary = _load_packed(index, Path(data_dir), resolution, max_depth)
+            scenes += packed
+            summaries.append(summary)
+            continue
         dataset = RawDataset(Path(data_dir))
         setup = dataset.setup
         voxel_size = setup.size / resolution
@@ -94,6 +118,37 @@ def load_scenes(
             summary.negatives += len(labels) - positives
         summaries.append(summary)
     return scenes, summaries
+
+
+def _load_packed(
+    index: int, folder: Path, resolution: int, max_depth: float
+) -> tuple[list[Scene], DatasetSummary]:
+    """Scenes of a shard folder (every shard's sha256 checked) and its counts."""
+    shards = ShardFolder(folder)
+    manifest = shards.manifest()
+    if manifest["resolution"] != resolution or manifest["max_depth"] != max_depth:
+        raise ValueError(
+            f"{folder} holds grids of resolution {manifest['resolution']} and depth cut-off "
+            f"{manifest['max_depth']} m; this run asks for {resolution} and {max_depth} m"
+        )
+    size = float(manifest["setup"]["size"])
+    voxel_size = size / resolution
+    summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, "packed shards")
+    scenes: list[Scene] = []
+    for shard in shards.load(verify=True):
+        for scene_id, grid, rows in zip(shard.scene_ids, shard.grids, shard.rows_by_scene(), strict=True):
+            labels, outside = LabelSet.from_rows(rows, voxel_size, resolution)
+            summary.outside_grid += outside
+            if not len(labels):
+                summary.scenes_without_labels += 1
+                continue
+            scenes.append(Scene(index, str(scene_id), PackedGrid(grid), labels, voxel_size))
+            positives = int(labels.label.sum())
+            summary.scenes += 1
+            summary.grasps += len(labels)
+            summary.positives += positives
+            summary.negatives += len(labels) - positives
+    return scenes, summary
 
 
 def _group_rows(ids: list[str], rows: np.ndarray) -> list[tuple[str, np.ndarray]]:
@@ -136,7 +191,7 @@ def prepare_grids(scenes: list[Scene], workers: int = 0, progress: bool = True) 
     With ``workers`` > 0 the fusion runs in that many spawned processes (Open3D and torch
     do not like being forked mid-run).
     """
-    sources = [scene.source for scene in scenes]
+    sources = [scene.source for scene in scenes if isinstance(scene.source, GridSource)]
     bar = tqdm(total=len(sources), desc="grids", unit="scene", disable=not progress, leave=False)
     built = 0
     if workers > 0 and len(sources) > 1:
@@ -160,24 +215,45 @@ class Sample:
 
 
 class SceneDataset(Dataset[Sample]):
-    """Scenes as (grid, labels) samples; with ``augment``, each draw is turned and shifted
-    by a random draw fixed by (seed, epoch, index), so runs and resumes repeat exactly."""
+    """Scenes as (grid, labels) samples, each scene ``copies`` times per epoch.
 
-    def __init__(self, scenes: list[Scene], augment: bool, seed: int) -> None:
+    Every draw is fixed by (seed, epoch, index), so runs and resumes repeat exactly. With
+    ``balance`` a draw keeps all positives and as many random negatives; ``augment`` is
+    ``"height"`` (a quarter-turn and a random height over the label-preserving range, VGN's),
+    ``"shift"`` (a quarter-turn and a ±4 voxel shift) or ``None``.
+    """
+
+    def __init__(
+        self,
+        scenes: list[Scene],
+        augment: str | None,
+        seed: int,
+        copies: int = 1,
+        balance: bool = False,
+    ) -> None:
+        if augment not in (None, "height", "shift"):
+            raise ValueError(f"augment must be 'height', 'shift' or None, got {augment!r}")
         self.scenes = scenes
         self.augment = augment
         self.seed = seed
+        self.copies = copies
+        self.balance = balance
         self.epoch = 0
 
     def __len__(self) -> int:
-        return len(self.scenes)
+        return len(self.scenes) * self.copies
 
     def __getitem__(self, index: int) -> Sample:
-        scene = self.scenes[index]
+        scene = self.scenes[index % len(self.scenes)]
         grid, labels = torch.from_numpy(scene.source.load()), scene.labels
-        if self.augment:
+        if self.augment or self.balance:
             rng = np.random.default_rng([self.seed, self.epoch, index])
-            grid, labels = random_augment(grid, labels, rng)
+            if self.balance:
+                labels = balanced_subset(labels, rng)
+            if self.augment == "height":
+                grid, labels = random_placement(grid, labels, rng)
+            elif self.augment == "shift":
+                grid, labels = random_augment(grid, labels, rng)
         return Sample(grid, labels, scene.voxel_size)
 
 

@@ -3,6 +3,12 @@
 Quality is judged at the detection threshold (0.9, as the service uses by default);
 rotation and width errors only make sense for positive labels, where a target exists.
 A ratio whose denominator is zero is ``None`` (JSON null), not 0 or NaN.
+
+Precision depends on the mix of labels it is measured on. The curve keeps it as measured
+(``precision``: on validation scenes with all their labels, mostly failures, as a robot meets
+them) and as it would be on balanced classes (``balanced_precision`` = TPR / (TPR + FPR)),
+which is what a balanced validation set shows. ``balanced_loss`` (the mean of the positives'
+and the negatives' mean loss) compares epochs whatever the mix.
 """
 
 from __future__ import annotations
@@ -18,7 +24,7 @@ from service.training.quaternions import flipped
 #: Quality at or above this counts as a predicted success.
 THRESHOLD = 0.9
 #: Thresholds at which precision and recall are also kept, to choose a model's operating point.
-CURVE_THRESHOLDS = (0.5, 0.6, 0.7, 0.8, 0.9)
+CURVE_THRESHOLDS = (0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95)
 
 #: Metric names in display order, with a short column title and format.
 COLUMNS: dict[str, tuple[str, str]] = {
@@ -45,6 +51,7 @@ class MetricAccumulator:
         self.labels = 0
         self.true_positives = self.false_positives = self.false_negatives = self.true_negatives = 0
         self.positives = 0
+        self.positive_loss_sum = 0.0
         self.rotation_error_sum = 0.0
         self.width_error_sum = 0.0
         #: threshold -> [true positives, predicted positives]
@@ -62,6 +69,7 @@ class MetricAccumulator:
         self.false_negatives += int((~predicted & actual).sum())
         self.true_negatives += int((~predicted & ~actual).sum())
         self.positives += int(actual.sum())
+        self.positive_loss_sum += float(losses[actual].sum())
         for threshold, counts in self.curve.items():
             predicted_at = predictions.quality >= threshold
             counts[0] += int((predicted_at & actual).sum())
@@ -74,8 +82,14 @@ class MetricAccumulator:
 
     def result(self) -> dict[str, float | int | None]:
         tp, fp, fn = self.true_positives, self.false_positives, self.false_negatives
+        negatives = self.labels - self.positives
+        positive_loss = _ratio(self.positive_loss_sum, self.positives)
+        negative_loss = _ratio(self.loss_sum - self.positive_loss_sum, negatives)
         return {
             "loss": _ratio(self.loss_sum, self.labels),
+            "balanced_loss": None
+            if positive_loss is None or negative_loss is None
+            else 0.5 * (positive_loss + negative_loss),
             "accuracy": _ratio(tp + self.true_negatives, self.labels),
             "precision": _ratio(tp, tp + fp),
             "recall": _ratio(tp, tp + fn),
@@ -84,13 +98,42 @@ class MetricAccumulator:
             "labels": self.labels,
             "positives": self.positives,
             "curve": {
-                f"{threshold:.1f}": {
+                f"{threshold:.2f}": {
                     "precision": _ratio(tp_at, predicted_at),
                     "recall": _ratio(tp_at, self.positives),
+                    "balanced_precision": _balanced_precision(
+                        tp_at, predicted_at - tp_at, self.positives, negatives
+                    ),
                 }
                 for threshold, (tp_at, predicted_at) in self.curve.items()
             },
         }
+
+
+def _balanced_precision(tp: int, fp: int, positives: int, negatives: int) -> float | None:
+    """Precision on equal numbers of positives and negatives: TPR / (TPR + FPR)."""
+    if not positives or not negatives:
+        return None
+    tpr, fpr = tp / positives, fp / negatives
+    return _ratio(tpr, tpr + fpr)
+
+
+def choose_threshold(curve: dict[str, dict[str, float | None]], target_precision: float) -> dict[str, float]:
+    """The lowest threshold whose measured precision (on the real mix of labels) reaches
+    ``target_precision``; the most precise one when none does. Returns the threshold with its
+    precision and recall."""
+    points = sorted((float(t), v) for t, v in curve.items() if v.get("precision") is not None)
+    if not points:
+        raise ValueError("no threshold predicted any success on the validation labels")
+    reached = [(t, v) for t, v in points if v["precision"] >= target_precision]
+    threshold, values = reached[0] if reached else max(points, key=lambda p: (p[1]["precision"], -p[0]))
+    return {
+        "threshold": threshold,
+        "precision": values["precision"],
+        "recall": values["recall"],
+        "target_precision": target_precision,
+        "target_reached": bool(reached),
+    }
 
 
 def _ratio(numerator: float, denominator: float) -> float | None:

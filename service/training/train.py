@@ -2,6 +2,11 @@
 
 After every epoch the full training state is checkpointed, so an interrupted run resumes
 (``resume=True``) at the next epoch with the same data order and augmentations.
+
+VGN's scale of optimisation on little data comes from many small steps: each scene is drawn
+``copies`` times an epoch, each draw with its own quarter-turn, height placement and balanced
+subset of labels. With validation, the weights written are those of the epoch with the lowest
+balanced validation loss, and ``patience`` stops a run that no longer improves.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from client.schemas import VGN_DEFAULT_THRESHOLD
 from service.planner import resolve_device
 from service.training import report
 from service.training.augment import MAX_Z_SHIFT
-from service.training.card import build_card, write_card
+from service.training.card import build_card, write_card, write_learning_curves
 from service.training.checkpoint import (
     TrainingState,
     capture_rng,
@@ -42,7 +47,8 @@ from service.training.dataset import (
 )
 from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.loss import gather, per_label_loss
-from service.training.metrics import THRESHOLD, MetricAccumulator
+from service.training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
+from service.training.shards import ShardFolder, manifest_summary
 from service.vgn.checkpoint import card_path, save_vgn
 from service.vgn.network import VGN
 
@@ -68,21 +74,39 @@ class TrainConfig:
     workers: int = 0
     resolution: int = RESOLUTION
     max_depth: float = MAX_DEPTH
-    augment: bool = True
-    #: operating threshold written to the card (the service's default for this model)
-    threshold: float = VGN_DEFAULT_THRESHOLD
+    #: "height" (quarter-turns and a random height, VGN's), "shift" (quarter-turns and ±4 voxels) or None
+    augment: str | None = "height"
+    #: draws of each training scene per epoch, each with its own augmentation and label subset
+    copies: int = 1
+    #: each draw keeps its scene's positives and as many random negatives
+    balance: bool = True
+    #: stop after this many epochs without a lower balanced validation loss (None: never)
+    patience: int | None = None
+    #: operating threshold written to the card (the service's default for this model);
+    #: None chooses it on the validation labels' real mix to reach ``target_precision``
+    threshold: float | None = VGN_DEFAULT_THRESHOLD
+    target_precision: float = 0.8
     resume: bool = False
     fresh: bool = False
     progress: bool = True
+
+    def __post_init__(self) -> None:
+        self.check()
 
     def check(self) -> None:
         if self.out.suffix != ".safetensors":
             raise TrainingError(f"--out must end in .safetensors, got {self.out}")
         if self.epochs < 1 or self.batch_scenes < 1 or self.workers < 0 or self.lr <= 0:
             raise TrainingError("epochs and batch size must be >= 1, workers >= 0, lr > 0")
+        if self.copies < 1 or (self.patience is not None and self.patience < 1):
+            raise TrainingError("--copies and --patience must be >= 1")
+        if self.augment not in (None, "height", "shift"):
+            raise TrainingError(f"--augment must be height, shift or none, got {self.augment!r}")
+        if not 0.0 < self.target_precision <= 1.0:
+            raise TrainingError(f"--target-precision must lie in (0, 1], got {self.target_precision}")
         if self.resolution % 8:
             raise TrainingError(f"resolution must be a multiple of 8 (VGN's encoder), got {self.resolution}")
-        if not 0.0 <= self.threshold <= 1.0:
+        if self.threshold is not None and not 0.0 <= self.threshold <= 1.0:
             raise TrainingError(f"--threshold must lie in [0, 1], got {self.threshold}")
         if self.resume and self.fresh:
             raise TrainingError("give --resume or --fresh, not both")
@@ -138,11 +162,16 @@ def train(
     state = _start(config, network, optimizer, _identity(config, val_scenes), log)
     resumed_from = state.epoch
 
-    train_data = SceneDataset(train_scenes, augment=config.augment, seed=config.seed)
-    val_data = SceneDataset(val_scenes, augment=False, seed=config.seed)
-    if state.epoch < config.epochs:
+    train_data = SceneDataset(
+        train_scenes, augment=config.augment, seed=config.seed, copies=config.copies, balance=config.balance
+    )
+    val_data = SceneDataset(val_scenes, augment=None, seed=config.seed)
+    if state.epoch < config.epochs and not _patience_ran_out(state.history, config.patience):
         log(report.header(validation=bool(val_scenes)))
     for epoch in range(state.epoch, config.epochs):
+        if _patience_ran_out(state.history, config.patience):
+            log(f"stopping: no lower validation loss in the last {config.patience} epoch(s)")
+            break
         started = time.perf_counter()
         loader = make_loader(train_data, config.batch_scenes, True, epoch, config.workers)
         train_metrics = _run_epoch(
@@ -152,21 +181,32 @@ def train(
         if len(val_data):
             loader = make_loader(val_data, config.batch_scenes, False, epoch, config.workers)
             val_metrics = _run_epoch(network, loader, device, None, "  val", config.progress)
+        steps = (state.history[-1]["steps"] if state.history else 0) + len(loader_steps(train_data, config))
         entry = {
             "epoch": epoch + 1,
             "train": train_metrics,
             "val": val_metrics,
             "seconds": round(time.perf_counter() - started, 3),
-            "train_scenes": len(train_data),
+            "train_scenes": len(train_scenes),
+            "steps": steps,
+            "label_visits": (state.history[-1].get("label_visits", 0) if state.history else 0)
+            + int(train_metrics["labels"] or 0),
         }
         state.history.append(entry)
         state.epoch = epoch + 1
+        if val_metrics is None or best_epoch(state.history) is entry:  # these weights ship
+            save_vgn(network, config.out)
         state.model, state.optimizer, state.rng = network.state_dict(), optimizer.state_dict(), capture_rng()
         save_state(state, checkpoint_path(config.out))
         log(report.row(entry))
 
-    save_vgn(network, config.out)
+    if not config.out.is_file():
+        save_vgn(network, config.out)
     best = best_epoch(state.history)
+    threshold, choice = _operating_threshold(config, best)
+    curves = write_learning_curves(state.history, config.out.with_suffix(".curves.png"))
+    if curves is None:
+        log("learning curves: matplotlib is not installed, no PNG written (pip install matplotlib)")
     card = build_card(
         weights=config.out,
         datasets=[s.as_dict() for s in summaries],
@@ -174,8 +214,11 @@ def train(
         history=state.history,
         best=best,
         command=command if command is not None else shlex.join(sys.argv),
-        threshold=config.threshold,
+        threshold=threshold,
     )
+    card["threshold_choice"] = choice
+    card["packed_data"] = _packed_data(config.data)
+    card["learning_curves"] = curves.name if curves else None
     write_card(card, card_path(config.out))
     return TrainResult(
         weights=config.out,
@@ -190,6 +233,48 @@ def train(
         device=str(device),
         resumed_from=resumed_from,
     )
+
+
+def loader_steps(dataset: SceneDataset, config: TrainConfig) -> range:
+    """The optimiser steps of one epoch (one per batch of scenes)."""
+    return range(-(-len(dataset) // config.batch_scenes))
+
+
+def _patience_ran_out(history: list[dict[str, Any]], patience: int | None) -> bool:
+    """True when the last ``patience`` epochs brought no lower validation loss."""
+    if patience is None or not history or history[0].get("val") is None:
+        return False
+    best = best_epoch(history)
+    return best is not None and history[-1]["epoch"] - best["epoch"] >= patience
+
+
+def _operating_threshold(config: TrainConfig, best: dict[str, Any] | None) -> tuple[float, dict[str, Any]]:
+    """The threshold for the card and how it was chosen: given, or the lowest one whose
+    precision on the validation labels (their real mix) reaches the target."""
+    if config.threshold is not None:
+        return config.threshold, {"rule": "given (--threshold)", "threshold": config.threshold}
+    curve = ((best or {}).get("val") or {}).get("curve")
+    try:
+        if not curve:
+            raise ValueError("the run has no validation scenes")
+        chosen = choose_threshold(curve, config.target_precision)
+    except ValueError as error:
+        rule = f"VGN's {VGN_DEFAULT_THRESHOLD}: auto could not choose ({error})"
+        return VGN_DEFAULT_THRESHOLD, {"rule": rule, "threshold": VGN_DEFAULT_THRESHOLD}
+    rule = (
+        f"lowest threshold whose precision on the validation scenes' labels (unbalanced, as generated) "
+        f"reaches {config.target_precision}, at the best epoch"
+    )
+    return chosen["threshold"], {"rule": rule, **chosen}
+
+
+def _packed_data(data: list[Path]) -> list[dict[str, Any]]:
+    """The shards (by hash) of every packed folder the run read."""
+    return [
+        {"folder": str(Path(p)), **manifest_summary(ShardFolder(Path(p)).manifest())}
+        for p in data
+        if ShardFolder(Path(p)).exists()
+    ]
 
 
 def _start(
@@ -276,11 +361,15 @@ def _memory_format(device: torch.device) -> torch.memory_format:
 
 
 def best_epoch(history: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The entry with the lowest validation loss (training loss when there is no validation)."""
+    """The entry with the lowest validation loss (training loss when there is no validation);
+    balanced over the two classes where both occur, so the mix of labels does not decide."""
 
     def score(entry: dict[str, Any]) -> float:
         metrics = entry.get("val") or entry["train"]
-        return metrics["loss"] if metrics.get("loss") is not None else float("inf")
+        for key in ("balanced_loss", "loss"):  # the balanced loss when the labels have both classes
+            if metrics.get(key) is not None:
+                return metrics[key]
+        return float("inf")
 
     return min(history, key=score) if history else None
 
@@ -293,11 +382,16 @@ def _training_settings(
         "lr": config.lr,
         "optimizer": "Adam",
         "batch_scenes": config.batch_scenes,
+        "copies_per_epoch": config.copies,
+        "balance": "per draw: all positives and as many random negatives" if config.balance else None,
+        "patience": config.patience,
         "val_fraction": config.val_fraction,
         "seed": config.seed,
-        "augment": f"z turns k*90 deg, z shifts U{{-{MAX_Z_SHIFT}..{MAX_Z_SHIFT}}} voxels"
-        if config.augment
-        else None,
+        "augment": {
+            "height": "z turns k*90 deg; random height: z shift uniform over all shifts keeping the labels in the grid",
+            "shift": f"z turns k*90 deg, z shifts U{{-{MAX_Z_SHIFT}..{MAX_Z_SHIFT}}} voxels",
+            None: None,
+        }[config.augment],
         "resolution": config.resolution,
         "max_depth": config.max_depth,
         "device": str(device),
