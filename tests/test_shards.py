@@ -114,8 +114,13 @@ def test_training_reads_shards_like_raw_data(raw: RawDataset, tmp_path: Path):
     assert packed_summary[0].grasps == sum(len(s.labels) for s in direct)
     out = tmp_path / "model" / "vgn.safetensors"
     args = ["--data", str(folder.root), "--out", str(out), "--epochs", "1", "--copies", "2"]
-    assert train_main([*args, "--val-fraction", "0.2", "--no-progress", "--threads", "1"]) == 0
+    evaluation = ["--eval-objects", "blocks", "--eval-scene", "blocks", "--eval-rounds", "1"]
+    assert train_main([*args, "--val-fraction", "0.2", "--no-progress", "--threads", "1", *evaluation]) == 0
     card = json.loads(out.with_suffix(".card.json").read_text())
+    executed = card["executed_grasps"]
+    assert executed["rounds"] == 1 and executed["settings"]["scene"] == "blocks"
+    assert executed["settings"]["threshold"] == card["threshold"], "at the card's operating threshold"
+    assert sum(executed["outcomes"].values()) == executed["attempts"]
     shards = card["packed_data"][0]["shards"]
     assert [s["sha256"] for s in shards] == [e["sha256"] for e in folder.manifest()["shards"]]
     assert card["packed_data"][0]["gripper"] == "franka-v2"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import sys
 from pathlib import Path
@@ -10,7 +11,9 @@ from pathlib import Path
 import torch
 
 from service.training import report
+from service.training.card import write_card
 from service.training.checkpoint import CheckpointMismatch, checkpoint_path
+from service.training.evaluate import EvaluationConfig, executed_grasp_success
 from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.train import TrainConfig, TrainingError, TrainResult, train
 
@@ -162,6 +165,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="precision that --threshold auto aims for (default %(default)s)",
     )
 
+    evaluation = parser.add_argument_group("executed-grasp evaluation (needs the simulator extra)")
+    evaluation.add_argument(
+        "--eval-objects",
+        metavar="DIR",
+        help="after training, run clear-scene rounds on these held-out objects with the new weights and "
+        "record executed-grasp success in the card",
+    )
+    evaluation.add_argument("--eval-scene", choices=["blocks", "pile", "packed"], default="pile")
+    evaluation.add_argument("--eval-rounds", metavar="R", type=int, default=10, help="(default %(default)s)")
+
     machine = parser.add_argument_group("machine")
     machine.add_argument(
         "--device",
@@ -223,6 +236,19 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
     )
 
 
+def evaluate_into_card(result: TrainResult, config: EvaluationConfig) -> None:
+    """Run the executed-grasp evaluation and add it to the card (and the printed summary)."""
+    results = result.weights.with_suffix(".eval") / f"{config.scene}-{config.object_count}-seed{config.seed}"
+    outcome = executed_grasp_success(result.weights, config, results)
+    card = json.loads(result.card.read_text())
+    card["executed_grasps"] = outcome
+    write_card(card, result.card)
+    from sim_worker.metrics import summary_table
+
+    print(f"executed grasps ({config.scene}, {outcome['rounds']} rounds, held-out objects):")
+    print(summary_table(outcome))
+
+
 def summary(result: TrainResult) -> str:
     """The end-of-run report: the epoch table, the best epoch and the files written."""
     lines = ["", report.table(result.history)]
@@ -251,7 +277,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         config = config_from_args(args)
         result = train(config, command=shlex.join(command))
-    except (TrainingError, CheckpointMismatch, FileNotFoundError, ValueError) as error:
+        if args.eval_objects:
+            evaluate_into_card(result, EvaluationConfig(args.eval_objects, args.eval_scene, args.eval_rounds))
+    except (TrainingError, CheckpointMismatch, FileNotFoundError, ValueError, RuntimeError) as error:
         print(f"vgn-train: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
