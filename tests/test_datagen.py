@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +12,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from client.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews, clean_and_balance
-from sim_worker.datagen import grasp_frame, middle_of_widest_run
+from sim_worker.datagen import DataGenConfig, grasp_frame, middle_of_widest_run
+from sim_worker.gripper import GRIPPER_VERSION
 from tests.scenes import circle_views
 
 
@@ -172,6 +174,26 @@ def test_resume_with_other_generation_settings_is_refused(server, tmp_path: Path
                "--objects", "blocks", "--scenes", "2", "--points", "8", "--out", str(out)]  # fmt: skip
     refused = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert refused.returncode == 2 and "other settings (scene)" in refused.stderr
+    generation = json.loads((out / "generation.json").read_text())
+    assert generation["gripper"] == GRIPPER_VERSION, "the dataset names the hand that labelled it"
+    generation["gripper"] = "box-v1"
+    (out / "generation.json").write_text(json.dumps(generation))
+    again = generate(server.url, out, scenes=2)
+    assert again.returncode == 2 and "gripper" in again.stderr, "labels of another hand are never mixed"
+
+
+def test_noisy_and_side_view_scenes_are_fixed_by_the_seed():
+    config = DataGenConfig(seed=4, noise_fraction=0.33, side_view_fraction=0.2)
+    conditions = [config.scene_conditions(i) for i in range(600)]
+    assert conditions == [DataGenConfig(seed=4, noise_fraction=0.33, side_view_fraction=0.2).scene_conditions(i)
+                          for i in range(600)]  # fmt: skip
+    noisy = np.mean([n for n, _ in conditions])
+    side = np.mean([s for _, s in conditions])
+    assert 0.27 < noisy < 0.39 and 0.15 < side < 0.25
+    assert not any(n or s for n, s in (DataGenConfig(seed=4).scene_conditions(i) for i in range(50)))
+    assert all(DataGenConfig(noise=True).scene_conditions(i)[0] for i in range(20)), "--noise: every scene"
+    with pytest.raises(ValueError, match="noise_fraction"):
+        DataGenConfig(noise_fraction=1.5)
 
 
 def test_a_session_the_service_forgot_is_reopened(server):
