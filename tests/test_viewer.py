@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 from pathlib import Path
 
 import numpy as np
@@ -160,3 +161,21 @@ def test_page_renders_in_headless_chromium(server, vgn, tmp_path: Path) -> None:
         WebDriverWait(driver, 30).until(lambda d: status.text.startswith("6 frames"))
         errors = [entry for entry in driver.get_log("browser") if entry["level"] == "SEVERE"]
         assert errors == []
+
+
+def test_cli_saves_the_viewer(server, vgn, tmp_path: Path, capsys) -> None:
+    from client.cli import main
+
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    for pose in circle_views(2):
+        vgn.add_frame(session, SCENE.depth(pose), pose)
+    out = tmp_path / "view.html"
+    assert main(["view", session, "--url", server.url, "--out", str(out), "--threshold", "0.5"]) == 0
+    page = out.read_text(encoding="utf-8")
+    scene = json.loads(page.split('<script id="scene" type="application/json">')[1].split("</script>")[0])
+    assert scene["session_id"] == session and scene["frame_count"] == 2 and scene["query"]["refresh"] == 0
+    assert len(scene["grasps"]) == len(vgn.grasps(session, threshold=0.5, max_grasps=20).grasps)
+    assert main(["view", "nope", "--url", server.url, "--out", str(tmp_path / "x.html")]) == 1
+    assert "404" in capsys.readouterr().err and not (tmp_path / "x.html").exists()
+    assert main(["view", session, "--url", server.url, "--out", str(out), "--approach", "0,0,-1"]) == 2
+    assert "max_approach_angle" in capsys.readouterr().err
