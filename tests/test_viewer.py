@@ -11,11 +11,12 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 
+from client.geometry import FINGER_DEPTH
 from client.schemas import Grasp
 from service.app import create_app
 from service.core import PlanningService
 from service.settings import Settings
-from service.viewer.scene import FINGER_DEPTH, gripper_outline, tilt_degrees
+from service.viewer.scene import grasp_outline, tilt_degrees
 from tests.browser import headless_chromium
 from tests.scenes import INTRINSICS, BoxScene, circle_views
 
@@ -45,7 +46,7 @@ def test_gripper_outline_has_the_grasp_width_and_finger_depth() -> None:
     grasp = Grasp(
         position=(0.1, 0.2, 0.3), orientation=(0, 1, 0, 0), approach=(0, 0, -1), width=0.04, quality=0.9
     )
-    outline = gripper_outline(grasp)
+    outline = grasp_outline(grasp)
     left_tip, left_base, right_base, right_tip = (np.array(p) for p in outline[:4])
     assert np.linalg.norm(left_base - right_base) == pytest.approx(0.04)
     # Fingers point along the approach (straight down for this grasp), from the palm.

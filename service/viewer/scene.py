@@ -12,13 +12,9 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from client.geometry import matrix_from_pose
+from client.geometry import gripper_outline, matrix_from_pose
 from client.schemas import Grasp, GraspQuery, GraspResult, SessionInfo
 
-#: Finger length along the approach, as VGN's gripper and ours (metres).
-FINGER_DEPTH = 0.05
-#: The stem drawn behind the palm, so the approach direction reads at a glance (metres).
-STEM_LENGTH = 0.03
 #: The browser stays responsive up to a few tens of thousands of markers.
 DEFAULT_MAX_POINTS = 30000
 
@@ -65,23 +61,9 @@ def workspace_edges(info: SessionInfo) -> list[list[float] | None]:
     return path
 
 
-def gripper_outline(grasp: Grasp) -> list[list[float]]:
-    """Palm, both fingers at the grasp's width and a stem, world frame (grasp frame: +z approach,
-    y closing axis, origin between the finger bases). Two strokes separated by the caller."""
-    half = grasp.width / 2
-    local = np.array(
-        [
-            [0, -half, FINGER_DEPTH],
-            [0, -half, 0],
-            [0, half, 0],
-            [0, half, FINGER_DEPTH],
-            [np.nan, np.nan, np.nan],
-            [0, 0, 0],
-            [0, 0, -STEM_LENGTH],
-        ]
-    )
-    pose = grasp.as_matrix()
-    world = local @ pose[:3, :3].T + pose[:3, 3]
+def grasp_outline(grasp: Grasp) -> list[list[float] | None]:
+    """The gripper at ``grasp`` (palm, both fingers at its width, a stem) as a polyline, world frame."""
+    world = gripper_outline(grasp.as_matrix(), grasp.width)
     return [_rounded(point) if np.all(np.isfinite(point)) else None for point in world]
 
 
@@ -118,7 +100,7 @@ def build_scene(
                 "width": round(g.width, 5),
                 "tilt_deg": tilt_degrees(g),
                 "position": _rounded(np.asarray(g.position)),
-                "outline": gripper_outline(g),
+                "outline": grasp_outline(g),
             }
             for rank, g in enumerate(grasps, 1)
         ],
