@@ -96,6 +96,13 @@ def test_view_rejects_bad_requests(viewer_http: TestClient, path, params, status
         assert word in response.text
 
 
+def test_view_of_an_empty_session(viewer_http: TestClient) -> None:
+    viewer_http.post("/sessions", json={"session_id": "empty"})
+    scene = viewer_http.get("/sessions/empty/view/data").json()
+    assert scene["frame_count"] == 0 and scene["cloud"]["points"] == [] and scene["grasps"] == []
+    assert viewer_http.get("/sessions/empty/view").status_code == 200
+
+
 def test_view_needs_the_api_key(random_checkpoint: Path) -> None:
     core = PlanningService.from_settings(Settings(model=random_checkpoint, api_key="s3cret"))
     with TestClient(create_app(core=core)) as client:

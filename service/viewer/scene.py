@@ -81,7 +81,7 @@ def build_scene(
     planning_error: str | None = None,
 ) -> dict[str, Any]:
     """The page's data: everything it draws and lists, JSON-ready."""
-    shown = subsample(cloud, query.max_points)
+    shown = subsample(cloud[np.all(np.isfinite(cloud), axis=1)], query.max_points)
     grasps = result.grasps if result else []
     return {
         "session_id": info.session_id,
