@@ -26,7 +26,9 @@ from tests.browser import headless_chromium
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/viewer.png"))
     parser.add_argument("--seed", type=int, default=3)
     args = parser.parse_args()
@@ -43,7 +45,9 @@ def main() -> None:
             vgn.add_frame(session, depth, pose)
         with headless_chromium() as driver:
             driver.get(f"{service.url}/sessions/{session}/view?max_grasps=10&refresh=0")
-            WebDriverWait(driver, 60).until(lambda d: d.execute_script("return document.body.dataset.rendered"))
+            WebDriverWait(driver, 60).until(
+                lambda d: d.execute_script("return document.body.dataset.rendered")
+            )
             driver.execute_script("document.querySelector('#grasp-rows tr').click()")
             shot = Image.open(io.BytesIO(driver.get_screenshot_as_png())).convert("RGB")
     shot.quantize(colors=128).save(args.out, optimize=True)
