@@ -23,6 +23,18 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
+# Headless Chromium for the viewer's browser test (tests/test_viewer.py fails without it).
+if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+  if command -v apt-get >/dev/null 2>&1; then
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    echo "installing chromium and chromium-driver (the viewer's browser test)"
+    $sudo apt-get update -qq && $sudo apt-get install -y -qq chromium chromium-driver >/dev/null
+  else
+    echo "warning: chromium and chromedriver are missing; the viewer's browser test will fail" >&2
+  fi
+fi
+
 # torch is pinned (==2.13.0) in pyproject.toml. Where pip is configured with a local CPU wheel
 # (find-links, as on our development machines) it takes that; elsewhere add
 # PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu to get the CPU build, not CUDA.

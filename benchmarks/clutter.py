@@ -8,7 +8,7 @@ use the procedural set, which no model trains on; give held-out object folders f
 packed. Every (planner, selection, scenario) gets its own results folder under ``--out``, so
 an interrupted benchmark resumes and more ``--rounds`` extend it. The table (success rate and
 percent cleared with 95 % Wilson intervals, planning time) is printed and written to
-``--out``/table.md and table.json.
+``--out``/table.md and table.json, and drawn as a bar chart in table.png.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import json
 import sys
 from pathlib import Path
 
+from benchmarks.chart import write_chart
 from client.clear_scene import resolve_planner
 from client.embedded import EmbeddedService
 from client.files import write_atomically
@@ -212,6 +213,9 @@ def write_table(rows: list[dict], args: argparse.Namespace) -> int:
     write_atomically(args.out / "table.md", table)
     write_atomically(args.out / "table.json", json.dumps(rows, indent=2) + "\n")
     print(table)
+    chart = write_chart(rows, PAPER_TABLE_1, PAPER_GPD, args.out / "table.png")
+    if chart:
+        print(f"chart: {chart}")
     return 0
 
 

@@ -4,6 +4,7 @@
     vgn-client status                     # health, readiness and model of a running service
     vgn-client sessions                   # list live sessions
     vgn-client grasps SESSION --top 5     # best grasps of a session as a table
+    vgn-client view SESSION --out v.html  # save the 3D session viewer (or open it in a browser)
     vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
 
 ``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key.
@@ -16,6 +17,8 @@ import importlib
 import json
 import os
 import sys
+import tempfile
+import webbrowser
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -63,6 +66,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
+
+    view = commands.add_parser(
+        "view",
+        help="the 3D session viewer: save it as a self-contained HTML file, or open it in a browser",
+        description="Fetch the session viewer (fused surface, workspace and best grasps in 3D, with a grasp "
+        "list) as one offline HTML file. With --out it is saved there; without, it is written to a "
+        "temporary file and opened in the default browser. The file is a snapshot; the page served at "
+        "/sessions/SESSION/view refreshes itself as frames arrive.",
+    )
+    _add_connection(view)
+    view.add_argument("session_id")
+    view.add_argument("--out", help="save the page to this file instead of opening it")
+    view.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn")
+    view.add_argument("--threshold", type=float, help="minimum quality (default: the planner's)")
+    view.add_argument("--max-grasps", type=int, default=20, help="grasps drawn (default %(default)s)")
+    view.add_argument("--crop-min", help="'x,y,z' lower crop corner, workspace frame, metres")
+    view.add_argument("--crop-max", help="'x,y,z' upper crop corner, workspace frame, metres")
+    view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
+    view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -211,6 +233,39 @@ def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
     return 0
 
 
+def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
+    options = {
+        name: getattr(args, name)
+        for name in (
+            "planner",
+            "threshold",
+            "max_grasps",
+            "crop_min",
+            "crop_max",
+            "approach",
+            "max_approach_angle",
+        )
+        if getattr(args, name) is not None
+    }
+    try:
+        page = vgn.view_page(args.session_id, **options)
+    except ValueError as error:  # the options broke GraspQuery's rules before anything was sent
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    if args.out:
+        Path(args.out).write_text(page, encoding="utf-8")
+        print(f"wrote {args.out}")
+        return 0
+    with tempfile.NamedTemporaryFile(
+        "w", suffix=".html", prefix="vgn-view-", delete=False, encoding="utf-8"
+    ) as file:
+        file.write(page)
+    print(f"wrote {file.name}")
+    if not webbrowser.open(Path(file.name).as_uri()):
+        print("no browser could be started here; open the file above in one", file=sys.stderr)
+    return 0
+
+
 SIM_COMMANDS = {"clear-scene": "client.clear_scene", "generate-data": "client.generate_data"}
 
 
@@ -262,6 +317,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 return _status(vgn)
             if args.command == "sessions":
                 return _sessions(vgn)
+            if args.command == "view":
+                return _view(vgn, args)
             return _grasps(vgn, args)
     except VGNError as error:
         detail = error.detail if isinstance(error.detail, str) else json.dumps(error.detail)

@@ -84,3 +84,28 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0
     pose = np.eye(4)
     pose[:3, 0], pose[:3, 1], pose[:3, 2], pose[:3, 3] = right, down, forward, eye
     return pose
+
+
+#: Finger length along the approach of VGN's gripper and ours (metres); used to draw grasps.
+FINGER_DEPTH = 0.05
+#: A stem drawn behind the palm so the approach direction reads at a glance (metres).
+STEM_LENGTH = 0.03
+
+
+def gripper_outline(grasp_pose: np.ndarray, width: float) -> np.ndarray:
+    """(7, 3) world points outlining a parallel-jaw grasp, for drawing: finger tip, palm, palm,
+    finger tip (one stroke), a NaN row (pen up), then the stem from the palm backwards. Grasp
+    frame as everywhere: +z approach, y the closing axis, origin between the finger bases."""
+    half = width / 2
+    local = np.array(
+        [
+            [0, -half, FINGER_DEPTH],
+            [0, -half, 0],
+            [0, half, 0],
+            [0, half, FINGER_DEPTH],
+            [np.nan, np.nan, np.nan],
+            [0, 0, 0],
+            [0, 0, -STEM_LENGTH],
+        ]
+    )
+    return local @ grasp_pose[:3, :3].T + grasp_pose[:3, 3]

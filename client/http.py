@@ -185,6 +185,11 @@ class Calls:
         return Call("GET", f"/sessions/{session_id}/grasps", _model(GraspResult), {"params": params})
 
     @staticmethod
+    def view_page(session_id: str, refresh: float = 0.0, **options: Any) -> Call[str]:
+        params = {**GraspQuery(**options).to_params(), "refresh": refresh}
+        return Call("GET", f"/sessions/{session_id}/view", lambda r: r.text, {"params": params})
+
+    @staticmethod
     def cloud(session_id: str) -> Call[np.ndarray]:
         return Call(
             "GET", f"/sessions/{session_id}/cloud", _npy, {"headers": {"Accept": "application/x-npy"}}
@@ -283,6 +288,11 @@ class VGNClient:
         """Ranked grasps; options are ``GraspQuery`` fields (threshold, max_grasps, ...)."""
         return self._run(Calls.grasps(session_id, **options))
 
+    def view_page(self, session_id: str, refresh: float = 0.0, **options: Any) -> str:
+        """The session viewer's self-contained HTML (3D surface, workspace and grasps); options are
+        ``GraspQuery`` fields, ``refresh`` the seconds between its checks for new frames (0: a snapshot)."""
+        return self._run(Calls.view_page(session_id, refresh, **options))
+
     def wait_until_up(self, timeout: float = 60.0) -> None:
         """Block until ``/healthz`` answers (for a service that is still starting)."""
         deadline = time.monotonic() + timeout
@@ -374,6 +384,9 @@ class AsyncVGNClient:
 
     async def grasps(self, session_id: str, **options: Any) -> GraspResult:
         return await self._run(Calls.grasps(session_id, **options))
+
+    async def view_page(self, session_id: str, refresh: float = 0.0, **options: Any) -> str:
+        return await self._run(Calls.view_page(session_id, refresh, **options))
 
     async def aclose(self) -> None:
         await self._http.aclose()

@@ -16,6 +16,7 @@ import numpy as np
 
 from client.http import VGNClient
 from client.schemas import Grasp
+from sim_worker import images
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, side_view, six_views
 from sim_worker.grasping import execute_grasp
 from sim_worker.gripper import Gripper
@@ -126,6 +127,8 @@ class ClutterRemoval:
             self.world.remove_objects_outside()
         record.cleared = record.successes
         record.seconds = round(time.perf_counter() - started, 3)
+        if self.image_dir is not None:
+            images.write_contact_sheet(self.image_dir, record)
         return record
 
     def _observe(self) -> float:
@@ -149,15 +152,19 @@ class ClutterRemoval:
         return grasps[0]  # the service ranks best first
 
     def _save_image(self, record: RoundRecord, grasp: Grasp) -> None:
-        """A picture of the scene with the gripper drawn at the chosen grasp."""
-        from PIL import Image
-
+        """A picture of the scene with the gripper placed, and drawn, at the chosen grasp."""
         self.gripper.reset(grasp.as_matrix())
         rgb = self.camera.render_rgb(self.views[0])
         self.gripper.park()
-        self.image_dir.mkdir(parents=True, exist_ok=True)
-        name = f"round{record.round_id:04d}_attempt{record.attempts:02d}.png"
-        Image.fromarray(rgb).save(self.image_dir / name)
+        images.save_attempt_image(
+            self.image_dir,
+            record.round_id,
+            record.attempts,
+            grasp,
+            rgb,
+            self.views[0],
+            self.camera.intrinsics,
+        )
 
 
 def _grasp_row(record, grasp: Grasp, trial, integration_ms, planning_ms, client_ms, count) -> dict:

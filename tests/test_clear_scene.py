@@ -136,7 +136,8 @@ def test_embedded_service_run_with_images(random_checkpoint: Path, tmp_path: Pat
                       "--threshold", "0.5", "--results", str(results), "--save-images")  # fmt: skip
     assert run.returncode == 0, run.stderr
     summary = check_results(results, 1)
-    assert len(list((results / "images").glob("*.png"))) == summary["attempts"]
+    assert len(list((results / "images").glob("round*_attempt*.png"))) == summary["attempts"]
+    assert (results / "images" / "round0000_sheet.png").exists()
 
 
 def test_without_a_model_the_run_explains_itself(tmp_path: Path, monkeypatch):
