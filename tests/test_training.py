@@ -28,7 +28,7 @@ from service.training.labels import LabelSet
 from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
 from service.training.metrics import MetricAccumulator, choose_threshold, rotation_error_deg
 from service.training.quaternions import flipped, multiply
-from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn
+from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
 from tests.scenes import TABLE_Z, BoxScene, circle_views
 
@@ -460,6 +460,34 @@ def test_train_resume_and_serve(dataset: RawDataset, tmp_path: Path, capsys, one
     assert rewritten["threshold"] == 0.7 and rewritten["history"] == card["history"]
     assert GraspPlanner.from_path(out, device="cpu").default_threshold == 0.7
     assert planner.ready and planner.infer(np.zeros((N, N, N), np.float32)).quality.shape == (N, N, N)
+
+
+def test_fine_tuning_starts_from_the_given_weights(dataset: RawDataset, tmp_path: Path, capsys, one_thread):
+    torch.manual_seed(3)
+    start = tmp_path / "start.safetensors"
+    save_vgn(VGN(), start)
+    out = tmp_path / "tuned.safetensors"
+    args = ["--data", str(dataset.root), "--out", str(out), "--cache", str(tmp_path / "cache")]
+    args += ["--epochs", "1", "--val-fraction", "0", "--no-progress", "--threads", "1", "--threshold", "0.9"]
+
+    assert main([*args, "--init", str(tmp_path / "missing.safetensors")]) == 2
+    assert "--init" in capsys.readouterr().err
+    not_vgn = tmp_path / "other.pt"
+    torch.save({"weight": torch.zeros(3)}, not_vgn)
+    assert main([*args, "--init", str(not_vgn)]) == 2
+    assert "VGN" in capsys.readouterr().err
+
+    assert main([*args, "--init", str(start), "--lr", "1e-9"]) == 0
+    before, after = load_vgn(start).state_dict(), load_vgn(out).state_dict()
+    drift = max(float((before[k] - after[k]).abs().max()) for k in before)
+    assert drift < 1e-6, "a vanishing learning rate leaves the initial weights in place"
+    init = json.loads(card_path(out).read_text())["training"]["init"]
+    assert init["path"] == str(start) and init["weights_id"] == weights_id(start)
+
+    random_start = tmp_path / "random.safetensors"
+    assert main([*args, "--lr", "1e-9", "--out", str(random_start)]) == 0
+    other = load_vgn(random_start).state_dict()
+    assert max(float((before[k] - other[k]).abs().max()) for k in before) > 1e-3, "no --init: random weights"
 
 
 def test_card_summary_needs_a_card_that_belongs_to_the_weights(tmp_path: Path):

@@ -140,6 +140,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument("--fresh", action="store_true", help="start over even though a checkpoint exists")
     run.add_argument(
+        "--init",
+        metavar="WEIGHTS",
+        type=Path,
+        default=None,
+        help="start from these weights instead of random ones (fine-tuning; e.g. the shipped model, "
+        "service/models/vgn.safetensors); recorded in the card",
+    )
+    run.add_argument(
         "--patience",
         metavar="P",
         type=int,
@@ -230,6 +238,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         patience=args.patience,
         threshold=args.threshold,
         target_precision=args.target_precision,
+        init=args.init,
         resume=args.resume,
         fresh=args.fresh,
         progress=args.progress,

@@ -49,7 +49,7 @@ from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.loss import gather, per_label_loss
 from service.training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
 from service.training.shards import ShardFolder, manifest_summary
-from service.vgn.checkpoint import card_path, save_vgn
+from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
 
 
@@ -86,6 +86,8 @@ class TrainConfig:
     #: None chooses it on the validation labels' real mix to reach ``target_precision``
     threshold: float | None = VGN_DEFAULT_THRESHOLD
     target_precision: float = 0.8
+    #: weights to start from instead of a random initialisation (fine-tuning, e.g. the shipped model)
+    init: Path | None = None
     resume: bool = False
     fresh: bool = False
     progress: bool = True
@@ -110,6 +112,8 @@ class TrainConfig:
             raise TrainingError(f"--threshold must lie in [0, 1], got {self.threshold}")
         if self.resume and self.fresh:
             raise TrainingError("give --resume or --fresh, not both")
+        if self.init is not None and not Path(self.init).is_file():
+            raise TrainingError(f"--init: no weights file at {self.init}")
 
 
 @dataclass
@@ -157,7 +161,7 @@ def train(
         f"{len(val_scenes)} val scenes; device {device}"
     )
 
-    network = VGN().to(device, memory_format=_memory_format(device))
+    network = _initial_network(config).to(device, memory_format=_memory_format(device))
     optimizer = torch.optim.Adam(network.parameters(), lr=config.lr)
     state = _start(config, network, optimizer, _identity(config, val_scenes), log)
     resumed_from = state.epoch
@@ -298,6 +302,17 @@ def _start(
     return TrainingState(epoch=0, model={}, optimizer={}, history=[], identity=identity)
 
 
+def _initial_network(config: TrainConfig) -> VGN:
+    """Random weights, or ``config.init``'s: fine-tuning reuses what a model learned about
+    geometry when new labels (another hand, a new scene type) are too few to learn it again."""
+    if config.init is None:
+        return VGN()
+    try:
+        return load_vgn(Path(config.init)).train()
+    except CheckpointError as error:
+        raise TrainingError(f"--init: {error}") from None
+
+
 def _check_checkpoint(config: TrainConfig) -> None:
     """Refuse, before any slow work, to resume nothing or to overwrite an earlier run unasked."""
     path = checkpoint_path(config.out)
@@ -392,6 +407,9 @@ def _training_settings(
             "shift": f"z turns k*90 deg, z shifts U{{-{MAX_Z_SHIFT}..{MAX_Z_SHIFT}}} voxels",
             None: None,
         }[config.augment],
+        "init": None
+        if config.init is None
+        else {"path": str(config.init), "weights_id": weights_id(Path(config.init))},
         "resolution": config.resolution,
         "max_depth": config.max_depth,
         "device": str(device),
