@@ -1,4 +1,4 @@
-"""VGN's raw dataset layout (DESIGN §5), shared by data generation and training.
+"""VGN's raw dataset layout (docs/conventions.md), shared by data generation and training.
 
     DIR/setup.json           size, intrinsics, max_opening_width, finger_depth
     DIR/grasps.csv           scene_id,qx,qy,qz,qw,x,y,z,width,label  (metres, workspace frame)

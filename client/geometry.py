@@ -1,6 +1,6 @@
 """Rigid-transform helpers shared by the client, the service and the simulator.
 
-Conventions (DESIGN §2): quaternions are ``[x, y, z, w]`` (scalar last, as scipy and ROS),
+Conventions (docs/conventions.md): quaternions are ``[x, y, z, w]`` (scalar last, as scipy and ROS),
 poses are 4×4 homogeneous matrices mapping points from a child frame into a parent frame.
 """
 
@@ -70,7 +70,7 @@ def invert(matrix: np.ndarray) -> np.ndarray:
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0)) -> np.ndarray:
     """Camera→world pose of an OpenCV camera at ``eye`` looking at ``target``.
 
-    The optical frame has x right, y down and z forward (DESIGN §2). ``up`` is a world
+    The optical frame has x right, y down and z forward (docs/conventions.md). ``up`` is a world
     direction that should appear upwards in the image; it must not be parallel to the view.
     """
     eye = np.asarray(eye, dtype=np.float64)

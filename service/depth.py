@@ -1,4 +1,4 @@
-"""Decoding of uploaded depth images into float32 metres (DESIGN §2)."""
+"""Decoding of uploaded depth images into float32 metres (docs/conventions.md)."""
 
 from __future__ import annotations
 

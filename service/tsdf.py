@@ -8,7 +8,7 @@ import open3d as o3d
 from client.geometry import invert
 from client.schemas import Intrinsics
 
-#: Truncation distance in voxels (DESIGN §2).
+#: Truncation distance in voxels (docs/conventions.md).
 TRUNCATION_VOXELS = 4
 #: Open3D's voxel read-out drops voxels with |tsdf| at or beyond this; VGN trained on that.
 OBSERVED_TSDF_LIMIT = 0.98
@@ -72,7 +72,7 @@ class TSDFVolume:
         """(N, N, N) float32 network input indexed [i, j, k] along the workspace x, y, z axes.
 
         Observed voxels with |tsdf| < 0.98 hold (tsdf + 1) / 2 (0.5 = surface, > 0.5 in front
-        of it); unobserved and deep voxels hold 0 (DESIGN §2). Vectorised equivalent of
+        of it); unobserved and deep voxels hold 0 (docs/conventions.md). Vectorised equivalent of
         reading Open3D's voxel point cloud back voxel by voxel, as VGN did.
         """
         values = np.asarray(self._volume.extract_volume_tsdf())  # (N³, 2): tsdf, weight

@@ -1,6 +1,6 @@
 """Simulated depth camera: PyBullet renders from pinhole intrinsics and camera poses.
 
-Conventions (DESIGN §2): metres and radians (angles in degrees only where a name ends in
+Conventions (docs/conventions.md): metres and radians (angles in degrees only where a name ends in
 ``_deg``); a camera pose is the 4×4 camera→world transform of the OpenCV optical frame
 (x right, y down, z forward); depth images are (H, W) float32 holding z in that frame, in
 metres, with 0 where there is no reading. Pixel (row v, column u) is the ray through the
@@ -12,7 +12,7 @@ with y up, i.e. the OpenCV frame rotated π about x) and a projection matrix, bo
 numbers in column-major order. Both are built here from the pose and the intrinsics, so the
 rendered images agree with what the service's TSDF integration assumes.
 
-Views follow VGN (DESIGN §4): cameras on a sphere about a centre, ``tilt`` measured from
+Views follow VGN (docs/conventions.md): cameras on a sphere about a centre, ``tilt`` measured from
 the vertical, ``azimuth`` about world z from +x.
 """
 

@@ -1,4 +1,4 @@
-"""Object sets for the simulated scenes: what can be dropped on the table (DESIGN §4).
+"""Object sets for the simulated scenes: what can be dropped on the table (docs/conventions.md).
 
 An :class:`ObjectSet` is a list of URDFs (one rigid object each) plus the scale that the
 scene generators multiply their random scale by. Three sources:
@@ -30,7 +30,7 @@ from client.files import write_atomically
 
 #: VGN's global scale for its block set (``{"blocks": 1.67}`` in its simulation).
 BLOCKS_SCALE = 1.67
-#: Gripper limits the object sets are sized for (DESIGN §2: max opening 0.08 m).
+#: Gripper limits the object sets are sized for (docs/conventions.md: max opening 0.08 m).
 MAX_OPENING = 0.08
 #: An object is graspable when some horizontal extent is at most this (margin under 0.08).
 MAX_GRASP_EXTENT = 0.07

@@ -1,4 +1,4 @@
-"""Scene generators: "pile", "packed" and "blocks", as VGN builds them (DESIGN §4).
+"""Scene generators: "pile", "packed" and "blocks", as VGN builds them (docs/conventions.md).
 
 Frames and units: positions are world coordinates in metres (the workspace cube's corner
 is the world origin, the table top is the plane z = ``TABLE_Z``); orientations are

@@ -1,4 +1,4 @@
-"""The PyBullet world: physics settings, the table, and the objects on it (DESIGN §4)."""
+"""The PyBullet world: physics settings, the table, and the objects on it (docs/conventions.md)."""
 
 from __future__ import annotations
 

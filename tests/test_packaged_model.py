@@ -42,7 +42,7 @@ def test_the_packaged_model_grasps_a_box_and_not_an_empty_table():
         box = fused_session(http, "box", BoxScene())
         grasps = http.get(f"/sessions/{box}/grasps").json()["grasps"]
         assert grasps, "a lone 8 x 6 x 6 cm box is graspable"
-        # The origin is between the finger bases (DESIGN §2): up to a finger depth from the contacts.
+        # The origin is between the finger bases (docs/conventions.md): up to a finger depth from the contacts.
         x, y, z = grasps[0]["position"]
         assert 0.09 <= x <= 0.21 and 0.10 <= y <= 0.20 and TABLE_Z < z <= TABLE_Z + 0.11, (
             "the best grasp is at the box"

@@ -1,7 +1,7 @@
 """The simulated camera: rendered depth against known geometry, renderers, views, noise.
 
 Scene: the World's table (top at z = 0.05) and one box standing on it, checked against
-the analytic ray caster of ``tests/scenes.py``. Frames and units as DESIGN §2.
+the analytic ray caster of ``tests/scenes.py``. Frames and units as docs/conventions.md.
 """
 
 from __future__ import annotations

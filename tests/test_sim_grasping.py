@@ -1,4 +1,4 @@
-"""Grasp execution on single objects with analytically known grasps (DESIGN §4 protocol)."""
+"""Grasp execution on single objects with analytically known grasps (docs/conventions.md)."""
 
 from __future__ import annotations
 

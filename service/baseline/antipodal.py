@@ -6,7 +6,7 @@ Candidates are sampled on the world-frame cloud with outward normals (``SceneVol
    seeded generator, so the same cloud always gives the same grasps.
 2. The closing axis y is the seed's normal, so the seed lies on the +y jaw. ``approaches``
    approach directions z are spread evenly around y, starting from the one closest to
-   straight down; x = y × z (DESIGN §2 grasp frame).
+   straight down; x = y × z (grasp frame: docs/conventions.md).
 3. For each of a few depths (fingertips 5–45 mm past the seed along z) the points in the
    closing region (|x| <= 1 cm, 0 <= z <= 5 cm, within the 8 cm opening towards -y) are
    collected. With at least ``min_points`` of them, the closed width is their y-extent + 2 mm

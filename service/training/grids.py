@@ -19,7 +19,7 @@ from client.dataset import DatasetSetup, RawDataset, SceneViews
 from client.files import atomic_writer
 from service.tsdf import TSDFVolume
 
-#: VGN's grid resolution (DESIGN §2); the network needs a multiple of 8.
+#: VGN's grid resolution (docs/conventions.md); the network needs a multiple of 8.
 RESOLUTION = 40
 #: Readings beyond this (metres) are ignored, as the service does by default.
 MAX_DEPTH = 2.0

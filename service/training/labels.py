@@ -10,7 +10,7 @@ import torch
 
 @dataclass(frozen=True)
 class LabelSet:
-    """Labelled grasps of one scene, on the voxel grid (DESIGN §2, VGN's Eq. 1).
+    """Labelled grasps of one scene, on the voxel grid (docs/conventions.md, VGN's Eq. 1).
 
     voxel (L, 3) int64 indices [i, j, k]; quaternion (L, 4) float32 [x, y, z, w] grasp →
     workspace; width (L,) float32 in voxels; label (L,) float32, 1 = success, 0 = failure.
@@ -34,7 +34,7 @@ class LabelSet:
         frame) and how many were dropped for lying outside the grid.
 
         A grasp's voxel is round(position / voxel_size), the inverse of detection's
-        position = index × voxel_size (DESIGN §2); generated positions are continuous, so this
+        position = index × voxel_size (docs/conventions.md); generated positions are continuous, so this
         is the nearest voxel.
         """
         rows = np.asarray(rows, dtype=np.float64).reshape(-1, 9)

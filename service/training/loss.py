@@ -1,4 +1,4 @@
-"""VGN's loss (DESIGN §4), read only at labelled voxels.
+"""VGN's loss (docs/conventions.md), read only at labelled voxels.
 
 Per label: BCE(q̂, y) + y · (min(1 - |q̂·q|, 1 - |q̂·q_π|) + 0.01 · (ŵ - w)²), with q_π the
 same grasp turned by π about its approach axis and widths in voxels; the batch loss is the

@@ -1,5 +1,5 @@
 """Quaternion algebra for the loss and the augmentations, on ``[x, y, z, w]`` tensors
-(DESIGN §2), so both sides share one (tested) convention."""
+(docs/conventions.md), so both sides share one (tested) convention."""
 
 from __future__ import annotations
 

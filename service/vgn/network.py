@@ -1,4 +1,4 @@
-"""The Volumetric Grasping Network (Breyer et al., CoRL 2020), DESIGN §4.
+"""The Volumetric Grasping Network (Breyer et al., CoRL 2020); its layout is in docs/conventions.md.
 
 Layer names match VGN's published state_dict (``encoder.conv1.weight`` ... ``conv_width.bias``)
 so its checkpoints load strictly.
