@@ -359,13 +359,18 @@ def test_frame_for_unknown_session_is_404_and_creates_nothing(http: TestClient) 
     assert http.get("/sessions/nosuch").status_code == 404
 
 
-def test_16_bit_png_frame_fuses_like_the_same_depth_sent_raw(http: TestClient) -> None:
+@pytest.mark.parametrize("depth_scale", [1000.0, 4000.0, 250.0], ids=["mm", "quarter-mm", "4mm"])
+def test_16_bit_png_frame_fuses_like_the_same_depth_sent_raw(http: TestClient, depth_scale: float) -> None:
+    """Each scale (units per metre) is honoured: a camera in quarter millimetres or 4 mm units fuses
+    the same surface as the metres it encodes."""
     for session_id in ("png", "raw"):
         assert http.post("/sessions", json={"session_id": session_id}).status_code == 201
+    encoded = np.round(DEPTH * depth_scale).astype(np.uint16)
     as_png = http.post(
-        "/sessions/png/frames", files=frame_files(meta_json(depth_scale=1000.0), png(DEPTH_MM), PNG, "d.png")
+        "/sessions/png/frames",
+        files=frame_files(meta_json(depth_scale=depth_scale), png(encoded), PNG, "d.png"),
     )
-    metres = (DEPTH_MM.astype(np.float32) / np.float32(1000.0)).astype(np.float32)
+    metres = (encoded.astype(np.float32) / np.float32(depth_scale)).astype(np.float32)
     as_raw = http.post("/sessions/raw/frames", files=frame_files(meta_json(), metres.tobytes()))
     assert as_png.status_code == 200, as_png.text
     assert as_raw.status_code == 200, as_raw.text
