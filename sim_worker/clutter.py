@@ -11,6 +11,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
@@ -25,27 +26,46 @@ from sim_worker.objects import object_set
 from sim_worker.results import ResultsFolder, RoundRecord
 from sim_worker.scenes import generate_scene
 from sim_worker.service_session import fresh_session
-from sim_worker.world import World
+from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
+from sim_worker.world import Renderer, World
 
 MAX_CONSECUTIVE_FAILURES = 2
+
+ClutterScene = Literal["blocks", "pile", "packed"]
+Views = Literal["six", "side"]
+Selection = Literal["best", "random"]
+Planner = Literal["vgn", "antipodal"]
 
 
 @dataclass(frozen=True)
 class ClutterConfig:
     """Settings of a clear-scene run; a resumed run must use the same ones."""
 
-    scene: str = "blocks"  # blocks | pile | packed
+    scene: ClutterScene = "blocks"
     objects: str | None = None  # object set name or URDF folder; None = the scene's default
     object_count: int = 5
     rounds: int = 1
     seed: int = 1
     threshold: float | None = None  # None: the service's default (the model's operating threshold)
-    views: str = "six"  # six | side
-    selection: str = "best"  # best | random
-    planner: str = "vgn"  # vgn | antipodal (the service's geometric baseline)
+    views: Views = "six"
+    selection: Selection = "best"
+    planner: Planner = "vgn"  # antipodal: the service's geometric baseline
     noise: bool = False
-    renderer: str = "auto"
+    renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
+
+    def __post_init__(self) -> None:
+        for name, allowed in (
+            ("scene", ClutterScene),
+            ("views", Views),
+            ("selection", Selection),
+            ("planner", Planner),
+            ("renderer", Renderer),
+        ):
+            check_choice(name, getattr(self, name), allowed)
+        check_at_least("object_count", self.object_count, 1)
+        check_at_least("rounds", self.rounds, 1)
+        check_fraction("threshold", self.threshold, optional=True)
 
     def as_json(self) -> dict:
         return asdict(self)

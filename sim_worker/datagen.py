@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -25,17 +26,20 @@ from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.objects import ObjectSet, object_set
 from sim_worker.scenes import generate_scene, poisson_object_count
 from sim_worker.service_session import fresh_session
-from sim_worker.world import WORKSPACE_SIZE, World
+from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
+from sim_worker.world import WORKSPACE_SIZE, Renderer, World
 
 #: Normals must point at least this much upwards: grasps from below the table are pointless.
 MIN_NORMAL_Z = -0.1
 #: Single side views look from this far off vertical (degrees), like a robot's head camera.
 SIDE_VIEW_TILT_DEG = (45.0, 65.0)
+#: Labelled scenes: blocks are kept for benchmarks that no model trains on.
+DataScene = Literal["pile", "packed"]
 
 
 @dataclass(frozen=True)
 class DataGenConfig:
-    scene: str = "pile"  # pile | packed
+    scene: DataScene = "pile"
     objects: tuple[str, ...] = ()  # object set names or URDF folders; () = the scene's default
     seed: int = 0
     points_per_scene: int = 120
@@ -44,12 +48,15 @@ class DataGenConfig:
     noise: bool = False  # every scene noisy (same as noise_fraction=1)
     noise_fraction: float = 0.0  # share of scenes rendered with depth noise
     side_view_fraction: float = 0.0  # share of scenes seen from one side view only
-    renderer: str = "auto"
+    renderer: Renderer = "auto"
 
     def __post_init__(self) -> None:
+        check_choice("scene", self.scene, DataScene)
+        check_choice("renderer", self.renderer, Renderer)
+        for name in ("points_per_scene", "yaws", "max_views"):
+            check_at_least(name, getattr(self, name), 1)
         for name in ("noise_fraction", "side_view_fraction"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+            check_fraction(name, getattr(self, name))
 
     def scene_conditions(self, index: int) -> tuple[bool, bool]:
         """(noisy, side view) for scene ``index``: drawn from the seed alone, so a scene is

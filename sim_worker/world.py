@@ -8,6 +8,7 @@ import pkgutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pybullet
@@ -16,6 +17,8 @@ from pybullet_utils.bullet_client import BulletClient
 #: Height of the table top in the world; the workspace cube's corner is the world origin.
 TABLE_Z = 0.05
 WORKSPACE_SIZE = 0.30
+#: "egl" renders on the GPU or Mesa's EGL, "tiny" on the CPU; "auto" tries EGL first.
+Renderer = Literal["auto", "egl", "tiny"]
 
 
 @contextlib.contextmanager
@@ -64,7 +67,7 @@ class World:
     exists, hence here), ``"tiny"`` uses the CPU TinyRenderer, ``"auto"`` tries EGL first.
     """
 
-    def __init__(self, config: PhysicsConfig = PhysicsConfig(), renderer: str = "auto") -> None:
+    def __init__(self, config: PhysicsConfig = PhysicsConfig(), renderer: Renderer = "auto") -> None:
         self.config = config
         self.p = BulletClient(connection_mode=pybullet.DIRECT)
         self.egl = renderer in ("egl", "auto") and self._load_egl(required=renderer == "egl")
