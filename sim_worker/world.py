@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import pkgutil
 import sys
@@ -13,6 +14,8 @@ from typing import Literal
 import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
+
+log = logging.getLogger(__name__)
 
 #: Height of the table top in the world; the workspace cube's corner is the world origin.
 TABLE_Z = 0.05
@@ -85,10 +88,15 @@ class World:
             if loader is None:
                 raise RuntimeError("pybullet's eglRenderer module is missing")
             with _quiet_native_stdout():
-                return self.p.loadPlugin(loader.get_filename(), "_eglRendererPlugin") >= 0
+                loaded = self.p.loadPlugin(loader.get_filename(), "_eglRendererPlugin") >= 0
+            if not loaded:
+                raise RuntimeError("pybullet could not load its EGL plugin")
+            log.info("rendering with PyBullet's EGL plugin")
+            return True
         except Exception as error:  # pybullet raises plain errors when EGL is unavailable
             if required:
                 raise RuntimeError(f"the EGL renderer cannot be loaded: {error}") from None
+            log.warning("EGL renderer unavailable (%s): rendering with the CPU TinyRenderer, slower", error)
             return False
 
     def _create_table(self) -> int:

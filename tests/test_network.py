@@ -75,6 +75,21 @@ class Payload:
         return (print, ("this must never run",))
 
 
+def test_the_weights_format_read_is_logged(tmp_path: Path, caplog: pytest.LogCaptureFixture):
+    network = VGN()
+    safetensors, state_dict = tmp_path / "w.safetensors", tmp_path / "w.pt"
+    save_vgn(network, safetensors)
+    torch.save(network.state_dict(), state_dict)
+    with caplog.at_level("INFO", logger="service.vgn.checkpoint"):
+        load_vgn(safetensors)
+        load_vgn(state_dict)
+    messages = [r.getMessage() for r in caplog.records if r.name == "service.vgn.checkpoint"]
+    assert messages == [
+        f"reading weights {safetensors} as safetensors",
+        f"reading weights {state_dict} as a PyTorch state_dict (tensors only, no pickled code)",
+    ]
+
+
 def test_arbitrary_pickles_are_refused(tmp_path: Path):
     path = tmp_path / "evil.pt"
     torch.save({"encoder.conv1.weight": Payload()}, path)

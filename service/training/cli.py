@@ -10,6 +10,7 @@ from pathlib import Path
 
 import torch
 
+from client.log_level import add_log_level_option, configure_logging
 from service.training import report
 from service.training.card import write_card
 from service.training.checkpoint import CheckpointMismatch, checkpoint_path
@@ -205,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="torch CPU threads (default: torch's; 1 is often faster on a busy or 2-core CPU)",
     )
     machine.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bars")
+    add_log_level_option(machine)
     return parser
 
 
@@ -280,6 +282,7 @@ def summary(result: TrainResult) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    configure_logging(args.log_level)
     if args.threads:
         torch.set_num_threads(args.threads)
     command = ["vgn-train", *(sys.argv[1:] if argv is None else argv)]

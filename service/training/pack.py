@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from client.dataset import RawDataset
+from client.log_level import add_log_level_option, configure_logging
 from service.training.shards import DEFAULT_SCENES_PER_SHARD, ShardError, ShardFolder, manifest_summary
 
 
@@ -37,11 +38,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--limit", type=int, help="pack at most this many new scenes")
     parser.add_argument("--show", type=Path, metavar="DIR", help="print a shard folder's totals and exit")
+    add_log_level_option(parser)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    configure_logging(args.log_level)
     if args.show is not None:
         try:
             print(json.dumps(manifest_summary(ShardFolder(args.show).manifest()), indent=2))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,8 @@ from client.files import write_atomically
 from service.vgn.network import VGN
 
 STATE_DICT_SUFFIXES = {".pt", ".pth"}
+
+log = logging.getLogger(__name__)
 
 
 class CheckpointError(Exception):
@@ -67,8 +70,10 @@ def read_state_dict(path: Path) -> dict[str, torch.Tensor]:
         raise CheckpointError(f"weights file {path} does not exist")
     try:
         if path.suffix == ".safetensors":
+            log.info("reading weights %s as safetensors", path)
             return load_file(str(path), device="cpu")
         if path.suffix in STATE_DICT_SUFFIXES:
+            log.info("reading weights %s as a PyTorch state_dict (tensors only, no pickled code)", path)
             state = torch.load(path, map_location="cpu", weights_only=True)
             if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
                 state = state["state_dict"]
