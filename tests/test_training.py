@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -21,13 +22,14 @@ from service.core import PlanningService
 from service.planner import GraspPlanner
 from service.training.augment import random_augment, rotate_z, shift_z
 from service.training.checkpoint import checkpoint_path
-from service.training.cli import main
+from service.training.cli import build_parser, config_from_args, main
 from service.training.dataset import Batch, Sample, collate, load_scenes, prepare_grids, split_scenes
 from service.training.grids import cache_key
 from service.training.labels import LabelSet
 from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
 from service.training.metrics import MetricAccumulator, choose_threshold, rotation_error_deg
 from service.training.quaternions import flipped, multiply
+from service.training.train import TrainConfig
 from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
 from tests.scenes import TABLE_Z, BoxScene, circle_views
@@ -511,6 +513,17 @@ def test_fine_tuning_starts_from_the_given_weights(dataset: RawDataset, tmp_path
     assert main([*args, "--lr", "1e-9", "--out", str(random_start)]) == 0
     other = load_vgn(random_start).state_dict()
     assert max(float((before[k] - other[k]).abs().max()) for k in before) > 1e-3, "no --init: random weights"
+
+
+def test_the_options_default_to_the_run_settings_defaults(tmp_path: Path):
+    """One place for each default: what vgn-train does unasked is what TrainConfig says."""
+    args = build_parser().parse_args(["--data", str(tmp_path), "--out", str(tmp_path / "w.safetensors")])
+    from_cli, from_config = (
+        config_from_args(args),
+        TrainConfig(data=[tmp_path], out=tmp_path / "w.safetensors"),
+    )
+    for field in fields(TrainConfig):
+        assert getattr(from_cli, field.name) == getattr(from_config, field.name), field.name
 
 
 def test_card_summary_needs_a_card_that_belongs_to_the_weights(tmp_path: Path):

@@ -6,6 +6,7 @@ import argparse
 import json
 import shlex
 import sys
+from dataclasses import fields
 from pathlib import Path
 
 import torch
@@ -15,8 +16,10 @@ from service.training import report
 from service.training.card import write_card
 from service.training.checkpoint import CheckpointMismatch, checkpoint_path
 from service.training.evaluate import EvaluationConfig, executed_grasp_success
-from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.train import TrainConfig, TrainingError, TrainResult, train
+
+#: The run's defaults live on TrainConfig; the options show and use them.
+DEFAULTS = {f.name: f.default for f in fields(TrainConfig)}
 
 DESCRIPTION = """\
 Train the Volumetric Grasping Network on one or more raw VGN datasets (the layout that
@@ -71,27 +74,27 @@ def build_parser() -> argparse.ArgumentParser:
         "--val-fraction",
         metavar="F",
         type=float,
-        default=0.1,
-        help="share of scenes held out for validation (default 0.1; 0 = none)",
+        default=DEFAULTS["val_fraction"],
+        help="share of scenes held out for validation (default %(default)s; 0 = none)",
     )
     data.add_argument(
         "--resolution",
         metavar="N",
         type=int,
-        default=RESOLUTION,
-        help=f"grid voxels a side (default {RESOLUTION}, VGN's; a multiple of 8)",
+        default=DEFAULTS["resolution"],
+        help="grid voxels a side (default %(default)s, VGN's; a multiple of 8)",
     )
     data.add_argument(
         "--max-depth",
         metavar="M",
         type=float,
-        default=MAX_DEPTH,
-        help=f"ignore depth readings beyond this many metres (default {MAX_DEPTH}, as the service)",
+        default=DEFAULTS["max_depth"],
+        help="ignore depth readings beyond this many metres (default %(default)s, as the service)",
     )
     data.add_argument(
         "--augment",
         choices=["height", "shift", "none"],
-        default="height",
+        default=DEFAULTS["augment"] or "none",
         help="height (default, VGN's): quarter-turns about z and the scene at a random height; "
         "shift: quarter-turns and z shifts of up to 4 voxels; none",
     )
@@ -102,8 +105,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--copies",
         metavar="K",
         type=int,
-        default=1,
-        help="draws of each training scene per epoch, each augmented and label-subsampled anew (default 1)",
+        default=DEFAULTS["copies"],
+        help="draws of each training scene per epoch, each augmented and label-subsampled anew "
+        "(default %(default)s)",
     )
     data.add_argument(
         "--no-balance",
@@ -121,20 +125,32 @@ def build_parser() -> argparse.ArgumentParser:
         help="weights to write; the card and checkpoint go beside it",
     )
     run.add_argument(
-        "--epochs", metavar="N", type=int, default=10, help="total epochs of the run (default 10, VGN's)"
+        "--epochs",
+        metavar="N",
+        type=int,
+        default=DEFAULTS["epochs"],
+        help="total epochs of the run (default %(default)s, VGN's)",
     )
     run.add_argument(
-        "--lr", metavar="LR", type=float, default=3e-4, help="Adam learning rate (default 3e-4, VGN's)"
+        "--lr",
+        metavar="LR",
+        type=float,
+        default=DEFAULTS["lr"],
+        help="Adam learning rate (default %(default)s, VGN's)",
     )
     run.add_argument(
         "--batch-scenes",
         metavar="B",
         type=int,
-        default=4,
-        help="scenes per optimiser step; each brings all its labels (default 4)",
+        default=DEFAULTS["batch_scenes"],
+        help="scenes per optimiser step; each brings all its labels (default %(default)s)",
     )
     run.add_argument(
-        "--seed", metavar="S", type=int, default=0, help="fixes split, order and augmentations (default 0)"
+        "--seed",
+        metavar="S",
+        type=int,
+        default=DEFAULTS["seed"],
+        help="fixes split, order and augmentations (default %(default)s)",
     )
     run.add_argument(
         "--resume", action="store_true", help="continue the run in OUT's checkpoint up to --epochs in total"
@@ -170,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--target-precision",
         metavar="P",
         type=float,
-        default=0.8,
+        default=DEFAULTS["target_precision"],
         help="precision that --threshold auto aims for (default %(default)s)",
     )
 
@@ -188,15 +204,15 @@ def build_parser() -> argparse.ArgumentParser:
     machine.add_argument(
         "--device",
         choices=["auto", "cpu", "cuda"],
-        default="auto",
+        default=DEFAULTS["device"],
         help="auto = the GPU when there is one (default)",
     )
     machine.add_argument(
         "--workers",
         metavar="W",
         type=int,
-        default=0,
-        help="processes fusing grids and loading batches (default 0 = in this process)",
+        default=DEFAULTS["workers"],
+        help="processes fusing grids and loading batches (default %(default)s = in this process)",
     )
     machine.add_argument(
         "--threads",

@@ -84,7 +84,7 @@ class TrainConfig:
     patience: int | None = None
     #: operating threshold written to the card (the service's default for this model);
     #: None chooses it on the validation labels' real mix to reach ``target_precision``
-    threshold: float | None = VGN_DEFAULT_THRESHOLD
+    threshold: float | None = None
     target_precision: float = 0.8
     #: weights to start from instead of a random initialisation (fine-tuning, e.g. the shipped model)
     init: Path | None = None
