@@ -23,7 +23,14 @@ from client.schemas import (
 from service.baseline import plan_antipodal
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady
-from service.planner import NO_MODEL_MESSAGE, GraspPlanner, antipodal_config, resolved_threshold
+from service.planner import (
+    NO_MODEL_MESSAGE,
+    GraspPlanner,
+    InferenceOptions,
+    antipodal_config,
+    resolved_threshold,
+)
+from service.runtime import configured_threads, runtime_report
 from service.sessions import SessionStore
 from service.settings import Settings
 
@@ -53,11 +60,13 @@ class PlanningService:
     @classmethod
     def from_settings(cls, settings: Settings) -> PlanningService:
         """Load the configured model (raises ``CheckpointError`` if it cannot be loaded)."""
-        if settings.torch_threads:
-            import torch
+        import torch
 
-            torch.set_num_threads(settings.torch_threads)
-        return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device))
+        torch.set_num_threads(settings.torch_threads or configured_threads())
+        options = InferenceOptions(
+            settings.inference, settings.precision, settings.batch_window_ms, settings.max_batch
+        )
+        return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
 
     # Sessions -----------------------------------------------------------------------------
     def create_session(self, spec: SessionCreate) -> SessionInfo:
@@ -184,4 +193,5 @@ class PlanningService:
             conventions=CONVENTIONS,
             threshold=self.planner.default_threshold,
             card=self.planner.card,
+            runtime={**runtime_report(), **self.planner.runtime()},
         )
