@@ -58,12 +58,14 @@ def prepare_environment(environ: dict[str, str] | os._Environ = os.environ) -> d
     defaults = {"OMP_WAIT_POLICY": WAIT_POLICY}
     applied = {name: value for name, value in defaults.items() if not environ.get(name)}
     environ.update(applied)
-    _prepared.update(
-        threads=configured_threads(environ),
-        set_by_service=sorted(applied),
-        before_torch="torch" not in sys.modules,
-    )
-    return dict(_prepared)
+    report = {
+        "threads": configured_threads(environ),
+        "set_by_service": sorted(applied),
+        "before_torch": "torch" not in sys.modules,
+    }
+    if environ is os.environ:
+        _prepared.update(report)
+    return report
 
 
 def apply_threads() -> int:

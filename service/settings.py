@@ -39,7 +39,7 @@ class Settings(BaseSettings):
     batch_window_ms: float | None = Field(
         default=None,
         ge=0,
-        le=50,
+        le=1000,
         description="how long a grasp request waits for others to share its forward pass; "
         "unset: 2 ms on a GPU, 0 on a CPU",
     )

@@ -107,7 +107,8 @@ class FastVGN(nn.Module):
         for index, (stride, padding) in enumerate(self._strides):
             weight, bias = getattr(self, f"plain{index}_w"), getattr(self, f"plain{index}_b")
             x = F.relu(F.conv3d(x, weight, bias, stride=stride, padding=padding))
-        # decoder.conv1's output is upsampled before decoder.conv2: both folded into one step.
+        # decoder.conv2, decoder.conv3 and the heads read upsampled inputs: each runs folded at
+        # the lower resolution, and its 8 parities are interleaved afterwards.
         for index in range(2):
             weight, bias = getattr(self, f"folded{index}_w"), getattr(self, f"folded{index}_b")
             x = pixel_shuffle_3d(F.relu(F.conv3d(x, weight, bias, padding=1)))
