@@ -16,7 +16,7 @@ from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.vgn.batching import MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
-from service.vgn.detection import DetectionConfig, detect_grasps
+from service.vgn.detection import DetectionConfig, detect_grasps, grasp_region
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
 
@@ -205,14 +205,13 @@ class GraspPlanner:
         """Grasps for ``grid`` (workspace frame) in the world frame, best first, and the
         time taken in milliseconds; the request's threshold defaults to ``default_threshold``."""
         started = time.perf_counter()
-        output = self.infer(grid)
+        if self._network is None:
+            raise ModelNotReady(NO_MODEL_MESSAGE)
+        config = detection_config(query, resolved_threshold(query, self.default_threshold))
+        pending = self._batcher.submit(np.ascontiguousarray(grid, dtype=np.float32))
+        region = grasp_region(grid, config)  # needs only the grid: worked out during the forward
+        output: NetworkOutput = pending.result()
         grasps: list[Grasp] = detect_grasps(
-            grid,
-            output.quality,
-            output.rotation,
-            output.width,
-            voxel_size,
-            workspace_pose,
-            detection_config(query, resolved_threshold(query, self.default_threshold)),
+            grid, output.quality, output.rotation, output.width, voxel_size, workspace_pose, config, region
         )
         return grasps, (time.perf_counter() - started) * 1e3
