@@ -16,7 +16,7 @@ from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.vgn.batching import MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
-from service.vgn.detection import DetectionConfig, detect_grasps, grasp_region
+from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
 
@@ -135,13 +135,7 @@ class GraspPlanner:
             self._network = form.to(device)
         window_ms = options.batch_window_ms
         self.batch_window_ms = default_batch_window_ms(device) if window_ms is None else window_ms
-        threads = torch.get_num_threads()
-        self._batcher = MicroBatcher(
-            self._forward_batch,
-            self.batch_window_ms / 1e3,
-            options.max_batch,
-            on_start=lambda: torch.set_num_threads(threads),
-        )
+        self._batcher = MicroBatcher(self._forward_batch, self.batch_window_ms / 1e3, options.max_batch)
 
     @classmethod
     def from_path(
@@ -208,10 +202,8 @@ class GraspPlanner:
         if self._network is None:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         config = detection_config(query, resolved_threshold(query, self.default_threshold))
-        pending = self._batcher.submit(np.ascontiguousarray(grid, dtype=np.float32))
-        region = grasp_region(grid, config)  # needs only the grid: worked out during the forward
-        output: NetworkOutput = pending.result()
+        output: NetworkOutput = self._batcher.run(np.ascontiguousarray(grid, dtype=np.float32))
         grasps: list[Grasp] = detect_grasps(
-            grid, output.quality, output.rotation, output.width, voxel_size, workspace_pose, config, region
+            grid, output.quality, output.rotation, output.width, voxel_size, workspace_pose, config
         )
         return grasps, (time.perf_counter() - started) * 1e3

@@ -1,8 +1,8 @@
 """Micro-batching: grasp requests that arrive together share one forward pass.
 
 Why: on a GPU one forward of a batch of 32 grids costs little more than one of a single
-grid, so concurrent sessions would otherwise queue behind each other for nothing. A single
-worker thread owns the network: it takes the first waiting grid, waits at most
+grid, so concurrent sessions would otherwise queue behind each other for nothing. One forward
+runs at a time: it takes the first waiting grid, waits at most
 ``window_s`` for others (none on a CPU by default, where a batch costs as much as its parts),
 also takes whatever is already queued, up to ``max_batch``, and runs them as one batch.
 Grids of different resolutions are run as separate batches. One forward at a time also
@@ -46,50 +46,45 @@ class BatchStats:
 
 
 class MicroBatcher:
-    """Runs ``forward`` on batches of concurrently submitted grids, in one worker thread."""
+    """Runs ``forward`` on batches of concurrently submitted grids.
 
-    def __init__(
-        self,
-        forward: BatchForward,
-        window_s: float = 0.0,
-        max_batch: int = 32,
-        on_start: Callable[[], None] | None = None,
-    ) -> None:
+    No thread of its own: a caller that finds no forward running becomes the *leader* and
+    runs the batch in its own thread, the others wait for it and for their results. A lone
+    request therefore never hands its grid to another thread (each hand-off costs a wake-up,
+    which on a loaded machine can take longer than the forward).
+    """
+
+    def __init__(self, forward: BatchForward, window_s: float = 0.0, max_batch: int = 32) -> None:
         self._forward = forward
         self.window_s = window_s
         self.max_batch = max_batch
-        self._on_start = on_start
         self._queue: queue.SimpleQueue[tuple[np.ndarray, Future]] = queue.SimpleQueue()
-        self._worker: threading.Thread | None = None
-        self._start_lock = threading.Lock()
+        self._turn = threading.Condition()
+        self._leading = False
         self.stats = BatchStats()
 
-    def submit(self, grid: np.ndarray) -> Future:
-        """Queue one (N, N, N) grid; the future resolves to its output."""
-        self._ensure_worker()
+    def run(self, grid: np.ndarray):
+        """The output for one grid, from a forward pass it may share with others."""
         future: Future = Future()
         self._queue.put((grid, future))
-        return future
-
-    def run(self, grid: np.ndarray):
-        """The output for one grid (blocks until its batch has run)."""
-        return self.submit(grid).result()
-
-    def _ensure_worker(self) -> None:
-        with self._start_lock:
-            if self._worker is None or not self._worker.is_alive():
-                self._worker = threading.Thread(target=self._serve, name="vgn-batcher", daemon=True)
-                self._worker.start()
-
-    def _serve(self) -> None:
-        if self._on_start is not None:
-            self._on_start()
-        while True:
-            self._run(self._collect())
+        while not future.done():
+            with self._turn:
+                while self._leading and not future.done():
+                    self._turn.wait()
+                if future.done():
+                    break
+                self._leading = True
+            try:
+                self._run(self._collect())
+            finally:
+                with self._turn:
+                    self._leading = False
+                    self._turn.notify_all()
+        return future.result()
 
     def _collect(self) -> list[tuple[np.ndarray, Future]]:
-        """The first waiting request, those arriving within the window, and any queued."""
-        pending = [self._queue.get()]
+        """What is queued, and what arrives within the window, up to ``max_batch``."""
+        pending: list[tuple[np.ndarray, Future]] = []
         deadline = time.perf_counter() + self.window_s
         while len(pending) < self.max_batch:
             remaining = deadline - time.perf_counter()
