@@ -152,3 +152,18 @@ def test_local_maxima_are_those_of_scipy_s_maximum_filter(size):
     actual = local_maxima(score, size)
     assert sorted(map(tuple, actual)) == sorted(map(tuple, expected))
     assert len(local_maxima(np.zeros((N, N, N), np.float32), size)) == 0
+
+
+def test_the_grasp_region_is_scipy_s_masked_dilation():
+    from scipy import ndimage
+
+    from service.vgn.detection import grasp_region
+
+    rng = np.random.default_rng(7)
+    grid = rng.choice([0.0, 0.3, 0.8], size=(N, N, N), p=[0.6, 0.2, 0.2]).astype(np.float32)
+    grid[0, :, :] = 0.8  # borders
+    for steps in (1, 2, 3):
+        config = DetectionConfig(surface_dilation=steps)
+        inside = (grid > 1e-3) & (grid < 0.5)
+        expected = ndimage.binary_dilation(grid > 0.5, iterations=steps, mask=~inside)
+        assert np.array_equal(grasp_region(grid, config), expected)
