@@ -10,14 +10,18 @@ One run measures the p50 and p95 latency (milliseconds) of
 2. uploading a frame in process: ``PlanningService.add_frame`` (numpy) and
    ``PlanningService.add_encoded_frame`` (raw float32 bytes, and a 16-bit PNG, decoded + fused);
 3. uploading a frame over HTTP to a real uvicorn child process (``EmbeddedService``) with
-   ``VGNClient.add_frame``: raw float32, and a uint16 millimetre array sent as a 16-bit PNG;
+   ``VGNClient.add_frame`` (the bare image as the body, meta in ``X-Frame-Meta``): raw
+   float32, and a uint16 millimetre array sent as a 16-bit PNG; and the same float32 frame
+   as a multipart upload, the other form the service accepts;
 4. running VGN *directly* (the baseline): the naive float32 eager forward pass of the network
    as trained (``torch.inference_mode``) on a (1, 1, 40, 40, 40) grid fused from 6 views,
    then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan``;
-6. a grasp request over HTTP: ``VGNClient.grasps``;
+6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
+   so that each runs the network; and without new frames, when the service answers from
+   the session's last network output;
 7. steadiness: the grasp request over HTTP again, on a second server started the same way;
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
    own client and session), which the service micro-batches into shared forward passes;
@@ -77,6 +81,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import httpx
 import numpy as np
 import open3d as o3d
 import torch
@@ -126,6 +131,7 @@ GRASPS_HTTP = "VGNClient.grasps"
 FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
+GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
 
@@ -139,6 +145,8 @@ class Operation:
     group: str
     call: Callable[[int], object]
     note: str = ""
+    #: Untimed, just before each call (e.g. a new frame, so the call cannot reuse old work).
+    prepare: Callable[[int], object] | None = None
 
 
 @dataclass
@@ -175,8 +183,10 @@ class Measurement:
         }
 
 
-def timed(call: Callable[[int], object], i: int) -> float:
-    """Milliseconds ``call(i)`` takes."""
+def timed(call: Callable[[int], object], i: int, prepare: Callable[[int], object] | None = None) -> float:
+    """Milliseconds ``call(i)`` takes (after an untimed ``prepare(i)``)."""
+    if prepare is not None:
+        prepare(i)
     started = time.perf_counter()
     call(i)
     return (time.perf_counter() - started) * 1e3
@@ -188,7 +198,7 @@ def run_interleaved(operations: list[Operation], repeats: int, warmup: int) -> l
     rows = [Measurement(op.name, op.group, note=op.note) for op in operations]
     for i in range(warmup + repeats):
         for op, row in zip(operations, rows, strict=True):
-            elapsed = timed(op.call, i)
+            elapsed = timed(op.call, i, op.prepare)
             if i >= warmup:
                 row.samples_ms.append(elapsed)
     return rows
@@ -199,8 +209,8 @@ def run_blocks(operations: list[Operation], repeats: int, warmup: int) -> list[M
     rows = []
     for op in operations:
         for i in range(warmup):
-            op.call(i)
-        samples = [timed(op.call, i) for i in range(warmup, warmup + repeats)]
+            timed(op.call, i, op.prepare)
+        samples = [timed(op.call, i, op.prepare) for i in range(warmup, warmup + repeats)]
         rows.append(Measurement(op.name, op.group, samples, op.note))
     return rows
 
@@ -332,8 +342,15 @@ def core_plan_operation(core: PlanningService, frames: Frames, query: GraspQuery
     for depth, pose in zip(frames.depths, frames.poses, strict=True):
         core.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
     grasps = len(core.plan(session_id, query).grasps)
+    n = len(frames)
+
+    def post_frame(k: int) -> None:  # so that every call runs the network
+        if k % 15 == 0:
+            core.reset_session(session_id)
+        core.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
     operation = Operation(
-        "PlanningService.plan", "5 grasps in-process", lambda k: core.plan(session_id, query)
+        "PlanningService.plan", "5 grasps in-process", lambda k: core.plan(session_id, query), "", post_frame
     )
     return operation, grasps
 
@@ -380,10 +397,12 @@ def network_operations(weights: Path, device: torch.device, grid: np.ndarray) ->
 
 # 3 + 6. Over HTTP --------------------------------------------------------------------------
 @contextlib.contextmanager
-def running_service(weights: Path, threads: int | None, device: str) -> Iterator[VGNClient]:
+def running_service(
+    weights: Path, threads: int | None, device: str, extra: dict[str, str] | None = None
+) -> Iterator[VGNClient]:
     """A real uvicorn child process on loopback, and a client talking to it. Without
     ``threads`` it runs the default configuration: none of ``RUNTIME_VARIABLES`` reach it."""
-    env = {"VGN_DEVICE": device, "VGN_API_KEY": ""}
+    env = {"VGN_DEVICE": device, "VGN_API_KEY": "", **(extra or {})}
     if threads is not None:
         env["VGN_TORCH_THREADS"] = str(threads)
     unset = RUNTIME_VARIABLES if threads is None else ()
@@ -402,6 +421,20 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
     def raw_frame(k: int) -> None:
         client.add_frame(raw_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
+    multipart = httpx.Client(base_url=client.url, timeout=60)
+    multipart_id = client.create_session(intrinsics=INTRINSICS).session_id
+    metas = [
+        FrameMeta(camera_pose=Pose.from_matrix(p), max_depth=MAX_DEPTH).model_dump_json()
+        for p in frames.poses
+    ]
+
+    def multipart_frame(k: int) -> None:
+        files = {
+            "meta": (None, metas[k % n], "application/json"),
+            "depth": ("d.raw", frames.raw[k % n], RAW_MEDIA_TYPE),
+        }
+        multipart.post(f"/sessions/{multipart_id}/frames", files=files).raise_for_status()
+
     def png_frame(k: int) -> None:
         client.add_frame(
             png_id,
@@ -413,6 +446,7 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
 
     return [
         Operation(FRAME_HTTP, group, raw_frame, "target"),
+        Operation("multipart upload (raw f32 part, httpx)", group, multipart_frame),
         Operation("VGNClient.add_frame (PNG16 from uint16 mm)", group, png_frame),
     ]
 
@@ -426,12 +460,31 @@ def fused_session(client: VGNClient, frames: Frames) -> str:
 
 
 def http_grasp_operation(
-    client: VGNClient, frames: Frames, name: str = GRASPS_HTTP, group: str = "6 grasps HTTP"
+    client: VGNClient,
+    frames: Frames,
+    name: str = GRASPS_HTTP,
+    group: str = "6 grasps HTTP",
+    new_frame: bool = True,
 ) -> tuple[Operation, int]:
-    """``VGNClient.grasps`` on a session with every view fused, and its grasp count."""
+    """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
+    ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
+    the network; without, the service answers from its last network output."""
     session_id = fused_session(client, frames)
     grasps = len(client.grasps(session_id, threshold=THRESHOLD).grasps)
-    operation = Operation(name, group, lambda k: client.grasps(session_id, threshold=THRESHOLD), "target")
+    n = len(frames)
+
+    def post_frame(k: int) -> None:
+        if k % 15 == 0:  # keep the session's pending cloud frames below the flush point
+            client.reset_session(session_id)
+        client.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
+    operation = Operation(
+        name,
+        group,
+        lambda k: client.grasps(session_id, threshold=THRESHOLD),
+        "target" if new_frame else "",
+        post_frame if new_frame else None,
+    )
     return operation, grasps
 
 
@@ -693,18 +746,23 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
+        grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, grasps_http, grasps_again]
+            + [plan, grasps_http, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
-        concurrency = (
-            concurrency_rows(client.url, frames, args.concurrent_requests) if args.concurrent_requests else []
-        )
+        concurrency = []
+        if args.concurrent_requests:
+            # Repeated requests on unchanged sessions would be answered from kept outputs:
+            # this server runs the network for every request, to measure the batching.
+            no_reuse = {"VGN_REUSE_OUTPUT": "false"}
+            with running_service(weights, args.threads, args.device, no_reuse) as batching:
+                concurrency = concurrency_rows(batching.url, frames, args.concurrent_requests)
         model = client.model()
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
@@ -744,7 +802,7 @@ def main(argv: list[str] | None = None) -> int:
         f"in-process {grasps['in_process']}, HTTP {grasps['http']}"
     )
     if results.concurrency:
-        print("\ngrasp requests over HTTP from concurrent sessions (micro-batched):")
+        print("\ngrasp requests over HTTP from concurrent sessions (micro-batched; VGN_REUSE_OUTPUT=false):")
         print(format_concurrency(results.concurrency))
     print(f"load average at end (1/5/15 min): {env['load_average_at_end']}")
     print("targets:" + ("" if gpu else " (no GPU: the GPU targets are not checked)"))

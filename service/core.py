@@ -22,7 +22,7 @@ from client.schemas import (
 )
 from service.baseline import plan_antipodal
 from service.depth import decode_depth
-from service.errors import InvalidInput, ModelNotReady
+from service.errors import InvalidInput, ModelNotReady, SessionNotFound
 from service.planner import (
     NO_MODEL_MESSAGE,
     GraspPlanner,
@@ -127,8 +127,7 @@ class PlanningService:
             started = time.perf_counter()
             session.volume.integrate(depth, intrinsics, camera_pose, max_depth)
             elapsed_ms = (time.perf_counter() - started) * 1e3
-            session.frame_count += 1
-            session.integration_ms += elapsed_ms
+            session.fused_frame(elapsed_ms)
             return FrameResult(session_id=session_id, frame_count=session.frame_count,
                                integration_ms=round(elapsed_ms, 3))  # fmt: skip
 
@@ -163,13 +162,18 @@ class PlanningService:
             observed = session.volume.cloud() if baseline else session.volume.grid()
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             frame_count, integration_ms = session.frame_count, session.integration_ms
+            revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
         if baseline:
             config = antipodal_config(query)
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
             threshold = config.threshold
         else:
-            grasps, _ = self.planner.plan(observed, voxel_size, workspace_pose, query)
+            reuse = self.settings.reuse_output and kept is not None and kept[0] == revision
+            output = kept[1] if reuse else self.planner.infer(observed)
+            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, query)
+            if self.settings.reuse_output and not reuse:
+                self._keep_output(session_id, revision, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
         return GraspResult(
@@ -180,6 +184,16 @@ class PlanningService:
             model=model,
             threshold=threshold,
         )
+
+    def _keep_output(self, session_id: str, revision: int, output: object) -> None:
+        """Keep a session's network output for the next request, unless a frame arrived
+        (or the session went) while the network ran."""
+        try:
+            with self.sessions.use(session_id) as session:
+                if session.revision == revision:
+                    session.network_output = (revision, output)
+        except SessionNotFound:
+            pass
 
     def model_info(self) -> ModelInfo:
         return ModelInfo(

@@ -199,11 +199,19 @@ class GraspPlanner:
         """Grasps for ``grid`` (workspace frame) in the world frame, best first, and the
         time taken in milliseconds; the request's threshold defaults to ``default_threshold``."""
         started = time.perf_counter()
-        if self._network is None:
-            raise ModelNotReady(NO_MODEL_MESSAGE)
+        grasps = self.detect(grid, self.infer(grid), voxel_size, workspace_pose, query)
+        return grasps, (time.perf_counter() - started) * 1e3
+
+    def detect(
+        self,
+        grid: np.ndarray,
+        output: NetworkOutput,
+        voxel_size: float,
+        workspace_pose: np.ndarray,
+        query: GraspQuery,
+    ) -> list[Grasp]:
+        """World-frame grasps, best first, from the network's ``output`` on ``grid``."""
         config = detection_config(query, resolved_threshold(query, self.default_threshold))
-        output: NetworkOutput = self._batcher.run(np.ascontiguousarray(grid, dtype=np.float32))
-        grasps: list[Grasp] = detect_grasps(
+        return detect_grasps(
             grid, output.quality, output.rotation, output.width, voxel_size, workspace_pose, config
         )
-        return grasps, (time.perf_counter() - started) * 1e3

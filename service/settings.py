@@ -44,6 +44,11 @@ class Settings(BaseSettings):
         "unset: 2 ms on a GPU, 0 on a CPU",
     )
     max_batch: int = Field(default=32, ge=1, le=256, description="most grids in one forward pass")
+    reuse_output: bool = Field(
+        default=True,
+        description="answer a grasp request on a session whose volume has not changed since the last one "
+        "from that one's network output (detection only)",
+    )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")
     max_frame_bytes: int = Field(default=32 * 1024 * 1024, ge=1024, description="largest request body")
