@@ -64,7 +64,13 @@ def test_a_failing_forward_reaches_every_waiting_request_and_the_batcher_goes_on
 def test_sessions_asking_at_once_over_http_share_forward_passes():
     """Several sessions of a real server request grasps at the same moment; with a batching
     window they are answered from shared forward passes, with the grasps each gets alone."""
-    env = {"VGN_API_KEY": "", "VGN_BATCH_WINDOW_MS": "300", "VGN_PRECISION": "fp32"}
+    # Without reuse: the repeated requests on unchanged sessions must each run the network.
+    env = {
+        "VGN_API_KEY": "",
+        "VGN_BATCH_WINDOW_MS": "300",
+        "VGN_PRECISION": "fp32",
+        "VGN_REUSE_OUTPUT": "false",
+    }
     scene = BoxScene()
     views = [(scene.depth(pose), pose) for pose in circle_views(3)]
     with EmbeddedService(model=PACKAGED_MODEL, env=env) as service, VGNClient(service.url) as vgn:
