@@ -193,7 +193,13 @@ class GraspPlanner:
         tensor = torch.from_numpy(grids)[:, None].to(self.device)
         with torch.inference_mode():
             quality, rotation, width = (t.cpu().numpy() for t in self._network(tensor))
-        return [NetworkOutput(quality[b, 0], rotation[b], width[b, 0]) for b in range(len(grids))]
+        if len(grids) == 1:
+            return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
+        # Copies, so that an output a session keeps does not hold on to the whole batch.
+        return [
+            NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
+            for b in range(len(grids))
+        ]
 
     def plan(self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery):
         """Grasps for ``grid`` (workspace frame) in the world frame, best first, and the
