@@ -6,7 +6,8 @@
     vgn-client grasps SESSION --top 5     # best grasps of a session as a table
     vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
 
-``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key.
+``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key;
+a ``grpc://HOST:PORT`` URL talks gRPC (needs the [grpc] extra) instead of HTTP.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import httpx
 
+from client.connect import connect
 from client.http import DEFAULT_URL, VGNClient, VGNError
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
@@ -29,7 +31,7 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--url",
         default=os.environ.get("VGN_URL", DEFAULT_URL),
-        help="service address (env VGN_URL; default %(default)s)",
+        help="service address, http://... or grpc://HOST:PORT (env VGN_URL; default %(default)s)",
     )
     parser.add_argument(
         "--api-key",
@@ -48,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--model", help="weights file (sets VGN_MODEL)")
+    serve.add_argument("--grpc-port", type=int, help="gRPC port (sets VGN_GRPC_PORT; default 50051, 0: off)")
 
     status = commands.add_parser("status", help="health, readiness and model of a service")
     _add_connection(status)
@@ -157,6 +160,14 @@ def _serve(args: argparse.Namespace) -> int:
         return 2
     if args.model:
         os.environ["VGN_MODEL"] = args.model
+    if args.grpc_port is not None:
+        os.environ["VGN_GRPC_PORT"] = str(args.grpc_port)
+    os.environ.setdefault("VGN_GRPC_HOST", args.host)
+    grpc_port = int(os.environ.get("VGN_GRPC_PORT", "50051") or 50051)
+    grpc_address = (
+        f"grpc://{os.environ['VGN_GRPC_HOST']}:{grpc_port}" if grpc_port else "off (VGN_GRPC_PORT=0)"
+    )
+    print(f"serving HTTP on http://{args.host}:{args.port}, gRPC on {grpc_address}", file=sys.stderr)
     uvicorn.run("service.app:app", host=args.host, port=args.port)
     return 0
 
@@ -245,7 +256,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"wrote {args.destination}: {kept} grasps")
         return 0
     try:
-        with VGNClient(args.url, api_key=args.api_key) as vgn:
+        with connect(args.url, api_key=args.api_key) as vgn:
             if args.command == "status":
                 return _status(vgn)
             if args.command == "sessions":
@@ -255,7 +266,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         detail = error.detail if isinstance(error.detail, str) else json.dumps(error.detail)
         print(f"error: the service answered {error.status}: {detail}", file=sys.stderr)
         return 1
-    except httpx.TransportError as error:
+    except (httpx.TransportError, ConnectionError, TimeoutError) as error:
         print(f"error: cannot reach the service at {args.url}: {error}", file=sys.stderr)
         return 1
 
