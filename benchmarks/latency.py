@@ -537,6 +537,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="round-robin over operations, or each operation back to back",
     )
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    parser.add_argument("--skip-grpc", action="store_true", help="leave out the gRPC rows")
     args = parser.parse_args(argv)
     if args.repeats < 1 or args.warmup < 0 or args.threads < 1:
         parser.error("--repeats and --threads must be >= 1, --warmup >= 0")
@@ -567,6 +568,21 @@ def measure_all(args: argparse.Namespace, weights: Path) -> tuple[list[Measureme
     return rows, {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
 
 
+def grpc_section(args: argparse.Namespace, weights: Path) -> tuple[list[Measurement], list[dict[str, Any]]]:
+    """The gRPC rows beside their HTTP twins (``benchmarks.grpc_latency``), and their targets;
+    none with ``--skip-grpc`` or without the grpc extra."""
+    if args.skip_grpc:
+        return [], []
+    try:
+        from benchmarks import grpc_latency
+    except ImportError as error:
+        print(f"gRPC rows left out: {error} (pip install 'vgn-service[grpc]')", flush=True)
+        return [], []
+    rows = grpc_latency.measure(weights, args.threads, args.device, render_frames(), args.repeats,
+                                args.warmup, args.schedule == "interleaved")  # fmt: skip
+    return rows, grpc_latency.targets(rows)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -575,6 +591,7 @@ def main(argv: list[str] | None = None) -> int:
         env = environment(args, weights, random_weights)
         print(format_header(env), flush=True)
         rows, grasps = measure_all(args, weights)
+        grpc_rows, grpc_checks = grpc_section(args, weights)
     checks = targets(rows)
     env["load_average_at_end"] = load_average()
     print()
@@ -586,6 +603,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at end (1/5/15 min): {env['load_average_at_end']}")
     print("targets:")
     print(format_targets(checks))
+    if grpc_rows:
+        from benchmarks import grpc_latency
+
+        print("\ngRPC beside HTTP (one server serving both):")
+        print(format_table(grpc_rows))
+        print(grpc_latency.format_rates(grpc_rows))
+        print("gRPC targets:")
+        print(grpc_latency.format_targets(grpc_checks))
     if args.json is not None:
         write_json(
             args.json,
@@ -594,6 +619,7 @@ def main(argv: list[str] | None = None) -> int:
                 "grasps": grasps,
                 "targets": checks,
                 "results": [row.as_dict() for row in rows],
+                "grpc": {"targets": grpc_checks, "results": [row.as_dict() for row in grpc_rows]},
             },
         )
         print(f"\nresults written to {args.json}")
