@@ -13,8 +13,8 @@ Targets: gRPC frame upload p50 no slower than HTTP's (ratio <= 1), streaming >= 
 The server queues up to ``STREAM_FRAMES`` + 4 frames for the fine (cloud) volume
 (``VGN_CLOUD_MAX_PENDING_FRAMES``) and every stream starts on a reset session, so these rows
 time the transport and the coarse fusion: with the default queue of 16, a long stream also
-fuses each frame into the 120³ cloud volume (~25 ms a frame on the 2-core VM), which bounds
-ingestion to ~30-40 frames/s over either front end.
+fuses each frame into the 120³ cloud volume (~25 ms a frame on the 2-core VM), whatever the
+front end.
 """
 
 from __future__ import annotations
