@@ -110,6 +110,15 @@ def test_a_session_is_shared_between_the_front_ends(clients):
         http.session("shared-http")
 
 
+def test_png_depth_over_grpc_fuses_like_raw_over_http(clients):
+    http, rpc = clients
+    millimetres = np.round(DEPTHS[0] * 1000).astype(np.uint16)
+    png, raw = rpc.create_session(intrinsics=INTRINSICS), http.create_session(intrinsics=INTRINSICS)
+    rpc.add_frame(png.session_id, millimetres, POSES[0])  # encoded as a 16-bit PNG
+    http.add_frame(raw.session_id, millimetres.astype(np.float32) / 1000, POSES[0])
+    np.testing.assert_allclose(rpc.tsdf(png.session_id), http.tsdf(raw.session_id), atol=1e-5)
+
+
 # Errors ---------------------------------------------------------------------------------------
 def rpc_error(call, *args, **kwargs) -> grpc.RpcError:
     with pytest.raises(grpc.RpcError) as caught:
@@ -322,3 +331,16 @@ def test_clear_scene_episode_over_grpc(service, tmp_path: Path):
     assert run.returncode == 0, run.stderr
     assert "success rate" in run.stdout
     assert (results / "summary.json").exists() and (results / "rounds.csv").read_text().count("\n") == 2
+
+
+def test_generate_data_over_grpc(service, tmp_path: Path):
+    from client.dataset import RawDataset
+
+    out = tmp_path / "data"
+    command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", service.grpc_url,
+               "--scene", "pile", "--objects", "blocks", "--scenes", "1", "--points", "4", "--renderer", "tiny",
+               "--out", str(out)]  # fmt: skip
+    run = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    ids, grasps = RawDataset(out).grasps()
+    assert ids == ["s0-0000000"] * 4 and grasps.shape == (4, 9)
