@@ -163,11 +163,9 @@ def _serve(args: argparse.Namespace) -> int:
     if args.grpc_port is not None:
         os.environ["VGN_GRPC_PORT"] = str(args.grpc_port)
     os.environ.setdefault("VGN_GRPC_HOST", args.host)
-    grpc_port = int(os.environ.get("VGN_GRPC_PORT", "50051") or 50051)
-    grpc_address = (
-        f"grpc://{os.environ['VGN_GRPC_HOST']}:{grpc_port}" if grpc_port else "off (VGN_GRPC_PORT=0)"
-    )
-    print(f"serving HTTP on http://{args.host}:{args.port}, gRPC on {grpc_address}", file=sys.stderr)
+    grpc_port = os.environ.get("VGN_GRPC_PORT") or "50051"  # the service checks the value
+    grpc = f"gRPC on grpc://{os.environ['VGN_GRPC_HOST']}:{grpc_port}" if grpc_port != "0" else "gRPC off"
+    print(f"serving HTTP on http://{args.host}:{args.port}, {grpc}", file=sys.stderr)
     uvicorn.run("service.app:app", host=args.host, port=args.port)
     return 0
 
@@ -266,6 +264,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         detail = error.detail if isinstance(error.detail, str) else json.dumps(error.detail)
         print(f"error: the service answered {error.status}: {detail}", file=sys.stderr)
         return 1
+    except ImportError as error:  # a grpc:// URL without the grpc extra
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     except (httpx.TransportError, ConnectionError, TimeoutError) as error:
         print(f"error: cannot reach the service at {args.url}: {error}", file=sys.stderr)
         return 1
