@@ -298,6 +298,17 @@ def test_health_and_reflection(service):
         } <= methods
 
 
+def test_grpc_calls_are_counted_in_the_metrics(clients):
+    http, rpc = clients
+    with pytest.raises(NotFound):
+        rpc.session("counted-ghost")
+    rpc.sessions()
+    text = http.metrics()
+    route = f"/{SERVICE_NAME}"
+    assert f'vgn_requests_total{{method="GRPC",route="{route}/GetSession",status="NOT_FOUND"}}' in text
+    assert f'vgn_requests_total{{method="GRPC",route="{route}/ListSessions",status="OK"}}' in text
+
+
 def test_a_taken_port_stops_the_start_up_clearly(random_checkpoint):
     from fastapi.testclient import TestClient
 

@@ -9,13 +9,12 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import add_GraspPlanningServicer_to_server
 from service.api.metrics import ServiceMetrics
 from service.core import PlanningService
+from service.grpc.errors import SERVICE_NAME
 from service.grpc.servicer import GraspPlanning
 
-SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GraspPlanning"].full_name
 #: Room beside the depth bytes in one frame message (pose, intrinsics, field tags).
 MESSAGE_OVERHEAD = 64 * 1024
 WORKERS = 8
