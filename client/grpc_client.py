@@ -200,17 +200,27 @@ class GRPCClient:
         depth_scale: float = 1000.0,
         max_depth: float = 2.0,
     ) -> StreamResult:
-        """Fuse many ``(depth, camera_pose)`` frames in one call; they are encoded as they are sent."""
+        """Fuse many ``(depth, camera_pose)`` frames in one call; they are encoded as they are
+        sent, so ``frames`` may be a generator. The client's ``timeout`` covers the whole stream."""
+        local_errors: list[Exception] = []
 
         def messages() -> Iterator[pb.Frame]:
-            for depth, pose in frames:
-                yield frame_message(session_id, depth, pose, intrinsics, depth_scale, max_depth)
+            try:
+                for depth, pose in frames:
+                    yield frame_message(session_id, depth, pose, intrinsics, depth_scale, max_depth)
+            except Exception as error:  # gRPC would report it as a bare CANCELLED
+                local_errors.append(error)
+                raise
 
-        def parse(answer: pb.StreamFramesResult) -> StreamResult:
-            return StreamResult(answer.session_id, answer.frames_received, answer.frame_count,
-                                answer.integration_ms)  # fmt: skip
-
-        return self._call(self._stub.StreamFrames, messages(), parse)
+        try:
+            answer = self._stub.StreamFrames(messages(), timeout=self.timeout, metadata=self._metadata)
+        except grpc.RpcError as error:
+            if local_errors:
+                raise local_errors[0] from None
+            raise error_of(error) from None
+        return StreamResult(
+            answer.session_id, answer.frames_received, answer.frame_count, answer.integration_ms
+        )
 
     # Read-outs ----------------------------------------------------------------------------
     def grasps(self, session_id: str, **options: Any) -> GraspResult:

@@ -276,6 +276,8 @@ def test_a_bad_frame_ends_the_stream_naming_it(clients):
     with pytest.raises(BadRequest, match="frame 2: raw depth must be"):
         rpc.stream_frames(session_id, frames)
     assert rpc.session(session_id).frame_count == 2
+    with pytest.raises(ValueError, match="2-D"):  # raised here while encoding, not a bare CANCELLED
+        rpc.stream_frames(session_id, [(DEPTHS[0], POSES[0]), (DEPTHS[0][None], POSES[0])])
 
 
 # Health, reflection, start-up ---------------------------------------------------------------------
