@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator
+from typing import TYPE_CHECKING
 
 from fastapi import FastAPI
 from starlette.formparsers import MultiPartParser
@@ -20,6 +21,9 @@ from service.api.metrics import RequestMetrics, ServiceMetrics
 from service.api.routes import api, health
 from service.core import PlanningService
 from service.settings import Settings
+
+if TYPE_CHECKING:
+    import grpc
 
 log = logging.getLogger("vgn.service")
 #: Bytes allowed beside the depth image in a frame upload (meta JSON, multipart headers).
@@ -44,8 +48,8 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
             yield
         finally:
             sweeper.cancel()
-            if grpc_server is not None:
-                grpc_server.stop(grace=1.0)
+            if grpc_server is not None:  # let calls in flight finish, briefly
+                await asyncio.to_thread(lambda: grpc_server.stop(grace=1.0).wait(2.0))
 
     app = FastAPI(
         title="vgn-service",
@@ -69,7 +73,7 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
     return app
 
 
-def start_grpc(service: PlanningService, settings: Settings, metrics: ServiceMetrics):
+def start_grpc(service: PlanningService, settings: Settings, metrics: ServiceMetrics) -> grpc.Server | None:
     """The gRPC front end on the same core (``VGN_GRPC_PORT``; 0: none). Imported only when
     wanted, so an HTTP-only install needs no grpcio; a port in use stops the start-up."""
     if settings.grpc_port == 0:
