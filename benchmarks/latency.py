@@ -25,6 +25,9 @@ One run measures the p50 and p95 latency (milliseconds) of
 7. steadiness: the grasp request over HTTP again, on a second server started the same way;
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
    own client and session), which the service micro-batches into shared forward passes;
+9. with the grpc extra (unless ``--skip-grpc``), the gRPC front end beside its HTTP twins on
+   one server serving both (``benchmarks.grpc_latency``): a frame upload, a grasp request and
+   a 60-frame stream;
 
 and checks the project's targets:
 
@@ -33,6 +36,7 @@ and checks the project's targets:
   detection measured in the same run;
 * the second server's grasp p50 is within 1.5x of the first's (the default start is steady);
 * on a GPU only: grasp p50 <= 5 ms and 32 sessions get >= 8x the throughput of one.
+* gRPC: frame upload p50 no slower than HTTP's, streamed frames >= 150 per second.
 
 The servers start with the *default configuration* (``uvicorn service.app:app`` with no
 ``VGN_TORCH_THREADS``, ``VGN_PRECISION`` or OpenMP variables) unless ``--threads`` is given;
@@ -713,6 +717,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="round-robin over operations, or each operation back to back",
     )
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    parser.add_argument("--skip-grpc", action="store_true", help="leave out the gRPC rows")
     args = parser.parse_args(argv)
     if args.repeats < 1 or args.warmup < 0 or (args.threads is not None and args.threads < 1):
         parser.error("--repeats and --threads must be >= 1, --warmup >= 0")
@@ -781,12 +786,32 @@ def format_concurrency(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def grpc_section(
+    args: argparse.Namespace, weights: Path, threads: int | None
+) -> tuple[list[Measurement], list[dict[str, Any]]]:
+    """The gRPC rows beside their HTTP twins (``benchmarks.grpc_latency``), and their targets;
+    none with ``--skip-grpc`` or without the grpc extra. Like the other servers, theirs runs
+    the default configuration unless ``--threads`` was given."""
+    if args.skip_grpc:
+        return [], []
+    try:
+        from benchmarks import grpc_latency
+    except ImportError as error:
+        print(f"gRPC rows left out: {error} (pip install 'vgn-service[grpc]')", flush=True)
+        return [], []
+    rows = grpc_latency.measure(weights, threads, args.device, render_frames(), args.repeats,
+                                args.warmup, args.schedule == "interleaved")  # fmt: skip
+    return rows, grpc_latency.targets(rows)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="vgn-bench-") as directory:
         weights, random_weights = weights_path(args.model, Path(directory))
         load_at_start = load_average()
+        requested_threads = args.threads  # measure_all replaces it with the service's choice
         results = measure_all(args, weights)
+        grpc_rows, grpc_checks = grpc_section(args, weights, requested_threads)
     env = environment(args, weights, random_weights)
     env["load_average_at_start"] = load_at_start
     env["server_runtime"] = results.server_runtime
@@ -807,6 +832,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load average at end (1/5/15 min): {env['load_average_at_end']}")
     print("targets:" + ("" if gpu else " (no GPU: the GPU targets are not checked)"))
     print(format_targets(checks))
+    if grpc_rows:
+        from benchmarks import grpc_latency
+
+        print("\ngRPC beside HTTP (one server serving both):")
+        print(format_table(grpc_rows))
+        print(grpc_latency.format_rates(grpc_rows))
+        print("gRPC targets:")
+        print(grpc_latency.format_targets(grpc_checks))
     if args.json is not None:
         write_json(
             args.json,
@@ -816,6 +849,7 @@ def main(argv: list[str] | None = None) -> int:
                 "targets": checks,
                 "concurrency": results.concurrency,
                 "results": [row.as_dict() for row in results.rows],
+                "grpc": {"targets": grpc_checks, "results": [row.as_dict() for row in grpc_rows]},
             },
         )
         print(f"\nresults written to {args.json}")

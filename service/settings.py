@@ -53,6 +53,13 @@ class Settings(BaseSettings):
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")
     max_frame_bytes: int = Field(default=32 * 1024 * 1024, ge=1024, description="largest request body")
     api_key: str | None = Field(default=None, description="when set, required as X-API-Key or Bearer token")
+    grpc_port: int = Field(
+        default=50051,
+        ge=0,
+        le=65535,
+        description="port of the gRPC front end, started with the app; 0 turns it off",
+    )
+    grpc_host: str = Field(default="127.0.0.1", description="address the gRPC front end listens on")
     cloud_resolution: int = Field(
         default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
     )

@@ -11,6 +11,7 @@ import httpx
 import numpy as np
 import pytest
 
+from client.connect import connect
 from client.embedded import EmbeddedService
 from client.http import VGNClient
 from service.planner import GraspPlanner, InferenceOptions
@@ -61,9 +62,10 @@ def test_a_failing_forward_reaches_every_waiting_request_and_the_batcher_goes_on
     assert batcher.run(np.ones((4, 4, 4), np.float32)) == 64.0
 
 
-def test_sessions_asking_at_once_over_http_share_forward_passes():
-    """Several sessions of a real server request grasps at the same moment; with a batching
-    window they are answered from shared forward passes, with the grasps each gets alone."""
+def test_sessions_asking_at_once_over_http_and_grpc_share_forward_passes():
+    """Several sessions of a real server request grasps at the same moment, first over HTTP,
+    then over gRPC; with a batching window each burst is answered from shared forward passes,
+    with the grasps each session gets alone: both front ends plan through the same batcher."""
     # Without reuse: the repeated requests on unchanged sessions must each run the network.
     env = {
         "VGN_API_KEY": "",
@@ -73,7 +75,7 @@ def test_sessions_asking_at_once_over_http_share_forward_passes():
     }
     scene = BoxScene()
     views = [(scene.depth(pose), pose) for pose in circle_views(3)]
-    with EmbeddedService(model=PACKAGED_MODEL, env=env) as service, VGNClient(service.url) as vgn:
+    with EmbeddedService(model=PACKAGED_MODEL, env=env, grpc=True) as service, VGNClient(service.url) as vgn:
         sessions = []
         for _ in range(SESSIONS):
             session_id = vgn.create_session(intrinsics=INTRINSICS).session_id
@@ -81,20 +83,24 @@ def test_sessions_asking_at_once_over_http_share_forward_passes():
                 vgn.add_frame(session_id, depth, pose)
             sessions.append(session_id)
         alone = [vgn.grasps(s, threshold=0.5).grasps for s in sessions]
-        before = vgn.model().runtime["batches"]
-        start = threading.Barrier(SESSIONS)
+        assert alone[0], "the box offers grasps"
+        for url in (service.url, service.grpc_url):
+            before = vgn.model().runtime["batches"]
+            start = threading.Barrier(SESSIONS)
 
-        def ask(session_id: str):
-            start.wait()
-            with VGNClient(service.url) as own:
-                return own.grasps(session_id, threshold=0.5).grasps
+            def ask(session_id: str, url: str = url, start: threading.Barrier = start):
+                with connect(url) as own:
+                    start.wait()
+                    return own.grasps(session_id, threshold=0.5).grasps
 
-        with ThreadPoolExecutor(SESSIONS) as pool:
-            together = list(pool.map(ask, sessions))
-        after = httpx.get(f"{service.url}/model").json()["runtime"]["batches"]
-    assert alone[0], "the box offers grasps"
-    for batched, single in zip(together, alone, strict=True):  # equal up to float rounding
-        assert [g.position for g in batched] == [g.position for g in single]
-        assert np.allclose([g.quality for g in batched], [g.quality for g in single], atol=1e-5)
-        assert np.allclose([g.orientation for g in batched], [g.orientation for g in single], atol=1e-5)
-    assert after["batches"] - before["batches"] < SESSIONS and after["largest"] > 1
+            with ThreadPoolExecutor(SESSIONS) as pool:
+                together = list(pool.map(ask, sessions))
+            after = httpx.get(f"{service.url}/model").json()["runtime"]["batches"]
+            for batched, single in zip(together, alone, strict=True):  # equal up to float rounding
+                assert [g.position for g in batched] == [g.position for g in single], url
+                assert np.allclose([g.quality for g in batched], [g.quality for g in single], atol=1e-5)
+                assert np.allclose(
+                    [g.orientation for g in batched], [g.orientation for g in single], atol=1e-5
+                )
+            assert after["batches"] - before["batches"] < SESSIONS, url
+            assert after["largest"] > 1, url
