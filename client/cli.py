@@ -25,7 +25,7 @@ from pathlib import Path
 
 import httpx
 
-from client.connect import connect
+from client.connect import connect, is_grpc_url
 from client.http import DEFAULT_URL, VGNClient, VGNError
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
@@ -320,6 +320,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         print(f"wrote {args.destination}: {kept} grasps")
         return 0
+    if args.command == "view" and is_grpc_url(args.url):
+        print(
+            "error: the session viewer is an HTML page served over HTTP only; give the service's "
+            "http:// URL (the same sessions are reachable over both front ends)",
+            file=sys.stderr,
+        )
+        return 2
     try:
         with connect(args.url, api_key=args.api_key) as vgn:
             if args.command == "status":

@@ -335,6 +335,16 @@ def test_connect_picks_the_transport_by_scheme(service):
     assert main(["status", "--url", service.grpc_url]) == 0
 
 
+def test_the_viewer_over_a_grpc_url_is_a_clear_error(service, tmp_path: Path, capsys):
+    from client.cli import main
+
+    with GRPCClient(service.grpc_url) as rpc:
+        session_id = rpc.create_session(intrinsics=INTRINSICS).session_id
+    out = tmp_path / "view.html"
+    assert main(["view", session_id, "--url", service.grpc_url, "--out", str(out)]) == 2
+    assert "HTTP only" in capsys.readouterr().err and not out.exists()
+
+
 def test_clear_scene_episode_over_grpc(service, tmp_path: Path):
     results = tmp_path / "grpc-run"
     command = [sys.executable, "-m", "client.cli", "clear-scene", "--sim", "--renderer", "tiny",
