@@ -15,6 +15,8 @@ COPY sim_worker sim_worker
 RUN pip install --no-cache-dir --extra-index-url https://download.pytorch.org/whl/cpu ".[service]"
 
 ENV VGN_DEVICE=cpu
-EXPOSE 8000
+# The gRPC front end (vgn.v1.GraspPlanning) listens beside HTTP on all interfaces of the container.
+ENV VGN_GRPC_HOST=0.0.0.0 VGN_GRPC_PORT=50051
+EXPOSE 8000 50051
 HEALTHCHECK --interval=30s --timeout=5s CMD python -c "import httpx; httpx.get('http://127.0.0.1:8000/healthz').raise_for_status()"
 CMD ["uvicorn", "service.app:app", "--host", "0.0.0.0", "--port", "8000"]

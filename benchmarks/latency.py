@@ -10,17 +10,38 @@ One run measures the p50 and p95 latency (milliseconds) of
 2. uploading a frame in process: ``PlanningService.add_frame`` (numpy) and
    ``PlanningService.add_encoded_frame`` (raw float32 bytes, and a 16-bit PNG, decoded + fused);
 3. uploading a frame over HTTP to a real uvicorn child process (``EmbeddedService``) with
-   ``VGNClient.add_frame``: raw float32, and a uint16 millimetre array sent as a 16-bit PNG;
-4. running VGN *directly* (the baseline): a forward pass under ``torch.inference_mode`` on a
-   (1, 1, 40, 40, 40) grid fused from 6 views, then ``detect_grasps`` at threshold 0.9 —
-   forward alone, detection alone, and their per-iteration sum;
+   ``VGNClient.add_frame`` (the bare image as the body, meta in ``X-Frame-Meta``): raw
+   float32, and a uint16 millimetre array sent as a 16-bit PNG; and the same float32 frame
+   as a multipart upload, the other form the service accepts;
+4. running VGN *directly* (the baseline): the naive float32 eager forward pass of the network
+   as trained (``torch.inference_mode``) on a (1, 1, 40, 40, 40) grid fused from 6 views,
+   then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
+   per-iteration sum; and, for comparison, the service's fast form of the network
+   (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan``;
-6. a grasp request over HTTP: ``VGNClient.grasps``;
+6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
+   so that each runs the network; and without new frames, when the service answers from
+   the session's last network output;
+7. steadiness: the grasp request over HTTP again, on a second server started the same way;
+8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
+   own client and session), which the service micro-batches into shared forward passes;
+9. with the grpc extra (unless ``--skip-grpc``), the gRPC front end beside its HTTP twins on
+   one server serving both (``benchmarks.grpc_latency``): a frame upload, a grasp request and
+   a 60-frame stream;
 
-and checks the project's latency targets:
+and checks the project's targets:
 
-* a frame request over HTTP (raw float32) has p50 <= 10 ms;
-* a grasp request over HTTP has p50 <= 1.3 × the p50 of the direct forward + detection.
+* a frame request over HTTP (raw float32) has p50 <= 5 ms;
+* a grasp request over HTTP has p50 <= 25 ms, and is >= 3x faster than the naive forward +
+  detection measured in the same run;
+* the second server's grasp p50 is within 1.5x of the first's (the default start is steady);
+* on a GPU only: grasp p50 <= 5 ms and 32 sessions get >= 8x the throughput of one.
+* gRPC: frame upload p50 no slower than HTTP's, streamed frames >= 150 per second.
+
+The servers start with the *default configuration* (``uvicorn service.app:app`` with no
+``VGN_TORCH_THREADS``, ``VGN_PRECISION`` or OpenMP variables) unless ``--threads`` is given;
+the baseline runs in this process with the thread count the service chose (read from
+``GET /model``), so the two differ only in how the network is computed.
 
 Why: the service is only worth putting between a robot and VGN if what it adds — sessions,
 multipart parsing, decoding, validation, JSON and the HTTP round trip — is small next to the
@@ -41,12 +62,8 @@ it part of detection and the size of the response (random weights rarely reach q
 so a trained model may return more grasps than this run sees).
 
 The benchmark process and the server share the machine's cores (the client waits while the
-server works, so they do not compute at the same time). Torch in this process and in the
-server use the same thread count (``--threads``, default: torch's default here, which is the
-number of cores); Open3D uses its own thread pool in both. On small virtual machines the
-forward pass with more than one torch thread depends on OpenMP's wait policy
-(``OMP_WAIT_POLICY``, ``GOMP_SPINCOUNT``, inherited by the server) and on other load, so
-compare runs made with the same ``--threads`` and environment; the load average is printed.
+server works, so they do not compute at the same time). Open3D uses its own thread pool in
+both. Other load on the machine skews every row alike; the load average is printed.
 """
 
 from __future__ import annotations
@@ -59,13 +76,16 @@ import platform
 import statistics
 import sys
 import tempfile
+import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import httpx
 import numpy as np
 import open3d as o3d
 import torch
@@ -74,11 +94,13 @@ from client.embedded import EmbeddedService
 from client.http import VGNClient, encode_depth
 from client.schemas import FrameMeta, GraspQuery, Pose, SessionCreate
 from service.core import PlanningService
-from service.planner import resolve_device
+from service.planner import resolve_device, resolve_precision
+from service.runtime import configured_threads
 from service.settings import Settings
 from service.tsdf import TRUNCATION_VOXELS, TSDFVolume
 from service.vgn.checkpoint import load_vgn, save_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
+from service.vgn.fast import FastVGN
 from service.vgn.network import VGN
 from tests.scenes import INTRINSICS, BoxScene, circle_views
 
@@ -90,14 +112,30 @@ MAX_DEPTH = 2.0
 DEPTH_SCALE = 1000.0  # PNG units per metre: millimetres
 THRESHOLD = 0.9
 VIEWS = 6
-FRAME_TARGET_MS = 10.0
-GRASP_RATIO_TARGET = 1.3
+FRAME_TARGET_MS = 5.0
+GRASP_TARGET_MS = 25.0
+GPU_GRASP_TARGET_MS = 5.0
+SPEEDUP_TARGET = 3.0
+STEADY_TARGET = 1.5
+THROUGHPUT_TARGET = 8.0
+CONCURRENCY = (1, 8, 32)
+#: Variables that would override the service's own choice of runtime settings.
+RUNTIME_VARIABLES = (
+    "VGN_TORCH_THREADS",
+    "VGN_PRECISION",
+    "VGN_INFERENCE",
+    "OMP_WAIT_POLICY",
+    "GOMP_SPINCOUNT",
+)
 RAW_MEDIA_TYPE = "application/octet-stream"
 PNG_MEDIA_TYPE = "image/png"
 
 FRAME_HTTP = "VGNClient.add_frame (raw f32)"
 GRASPS_HTTP = "VGNClient.grasps"
-FORWARD = "VGN forward (inference_mode)"
+FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
+FAST_FORWARD = "VGN forward, service's fast form"
+GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
+GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
 
@@ -111,6 +149,8 @@ class Operation:
     group: str
     call: Callable[[int], object]
     note: str = ""
+    #: Untimed, just before each call (e.g. a new frame, so the call cannot reuse old work).
+    prepare: Callable[[int], object] | None = None
 
 
 @dataclass
@@ -147,8 +187,10 @@ class Measurement:
         }
 
 
-def timed(call: Callable[[int], object], i: int) -> float:
-    """Milliseconds ``call(i)`` takes."""
+def timed(call: Callable[[int], object], i: int, prepare: Callable[[int], object] | None = None) -> float:
+    """Milliseconds ``call(i)`` takes (after an untimed ``prepare(i)``)."""
+    if prepare is not None:
+        prepare(i)
     started = time.perf_counter()
     call(i)
     return (time.perf_counter() - started) * 1e3
@@ -160,7 +202,7 @@ def run_interleaved(operations: list[Operation], repeats: int, warmup: int) -> l
     rows = [Measurement(op.name, op.group, note=op.note) for op in operations]
     for i in range(warmup + repeats):
         for op, row in zip(operations, rows, strict=True):
-            elapsed = timed(op.call, i)
+            elapsed = timed(op.call, i, op.prepare)
             if i >= warmup:
                 row.samples_ms.append(elapsed)
     return rows
@@ -171,8 +213,8 @@ def run_blocks(operations: list[Operation], repeats: int, warmup: int) -> list[M
     rows = []
     for op in operations:
         for i in range(warmup):
-            op.call(i)
-        samples = [timed(op.call, i) for i in range(warmup, warmup + repeats)]
+            timed(op.call, i, op.prepare)
+        samples = [timed(op.call, i, op.prepare) for i in range(warmup, warmup + repeats)]
         rows.append(Measurement(op.name, op.group, samples, op.note))
     return rows
 
@@ -304,8 +346,15 @@ def core_plan_operation(core: PlanningService, frames: Frames, query: GraspQuery
     for depth, pose in zip(frames.depths, frames.poses, strict=True):
         core.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
     grasps = len(core.plan(session_id, query).grasps)
+    n = len(frames)
+
+    def post_frame(k: int) -> None:  # so that every call runs the network
+        if k % 15 == 0:
+            core.reset_session(session_id)
+        core.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
     operation = Operation(
-        "PlanningService.plan", "5 grasps in-process", lambda k: core.plan(session_id, query)
+        "PlanningService.plan", "5 grasps in-process", lambda k: core.plan(session_id, query), "", post_frame
     )
     return operation, grasps
 
@@ -335,20 +384,36 @@ def network_operations(weights: Path, device: torch.device, grid: np.ndarray) ->
     def detect(_: int) -> int:
         return len(detect_grasps(grid, *output, voxel_size, pose, config))
 
+    fast = FastVGN.from_vgn(load_vgn(weights), resolve_precision("auto", device)).to(device)
+
+    def fast_forward(_: int) -> None:
+        with torch.inference_mode():
+            [t.cpu() for t in fast(tensor)]
+
     group = "4 network direct"
     forward(0)
     return [
         Operation(FORWARD, group, forward, "baseline"),
         Operation(DETECTION, group, detect, "baseline"),
+        Operation(FAST_FORWARD, group, fast_forward),
     ], detect(0)
 
 
 # 3 + 6. Over HTTP --------------------------------------------------------------------------
 @contextlib.contextmanager
-def running_service(weights: Path, threads: int, device: str) -> Iterator[VGNClient]:
-    """A real uvicorn child process on loopback, and a client talking to it."""
-    env = {"VGN_TORCH_THREADS": str(threads), "VGN_DEVICE": device, "VGN_API_KEY": ""}
-    with EmbeddedService(model=weights, env=env) as service, VGNClient(service.url) as client:
+def running_service(
+    weights: Path, threads: int | None, device: str, extra: dict[str, str] | None = None
+) -> Iterator[VGNClient]:
+    """A real uvicorn child process on loopback, and a client talking to it. Without
+    ``threads`` it runs the default configuration: none of ``RUNTIME_VARIABLES`` reach it."""
+    env = {"VGN_DEVICE": device, "VGN_API_KEY": "", **(extra or {})}
+    if threads is not None:
+        env["VGN_TORCH_THREADS"] = str(threads)
+    unset = RUNTIME_VARIABLES if threads is None else ()
+    with (
+        EmbeddedService(model=weights, env=env, unset=unset) as service,
+        VGNClient(service.url) as client,
+    ):
         yield client
 
 
@@ -359,6 +424,20 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
 
     def raw_frame(k: int) -> None:
         client.add_frame(raw_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
+    multipart = httpx.Client(base_url=client.url, timeout=60)
+    multipart_id = client.create_session(intrinsics=INTRINSICS).session_id
+    metas = [
+        FrameMeta(camera_pose=Pose.from_matrix(p), max_depth=MAX_DEPTH).model_dump_json()
+        for p in frames.poses
+    ]
+
+    def multipart_frame(k: int) -> None:
+        files = {
+            "meta": (None, metas[k % n], "application/json"),
+            "depth": ("d.raw", frames.raw[k % n], RAW_MEDIA_TYPE),
+        }
+        multipart.post(f"/sessions/{multipart_id}/frames", files=files).raise_for_status()
 
     def png_frame(k: int) -> None:
         client.add_frame(
@@ -371,20 +450,90 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
 
     return [
         Operation(FRAME_HTTP, group, raw_frame, "target"),
+        Operation("multipart upload (raw f32 part, httpx)", group, multipart_frame),
         Operation("VGNClient.add_frame (PNG16 from uint16 mm)", group, png_frame),
     ]
 
 
-def http_grasp_operation(client: VGNClient, frames: Frames) -> tuple[Operation, int]:
-    """``VGNClient.grasps`` on a session with every view fused, and its grasp count."""
+def fused_session(client: VGNClient, frames: Frames) -> str:
+    """A session of ``client``'s service with every view fused."""
     session_id = client.create_session(intrinsics=INTRINSICS).session_id
     for depth, pose in zip(frames.depths, frames.poses, strict=True):
         client.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+    return session_id
+
+
+def http_grasp_operation(
+    client: VGNClient,
+    frames: Frames,
+    name: str = GRASPS_HTTP,
+    group: str = "6 grasps HTTP",
+    new_frame: bool = True,
+) -> tuple[Operation, int]:
+    """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
+    ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
+    the network; without, the service answers from its last network output."""
+    session_id = fused_session(client, frames)
     grasps = len(client.grasps(session_id, threshold=THRESHOLD).grasps)
+    n = len(frames)
+
+    def post_frame(k: int) -> None:
+        if k % 15 == 0:  # keep the session's pending cloud frames below the flush point
+            client.reset_session(session_id)
+        client.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
     operation = Operation(
-        GRASPS_HTTP, "6 grasps HTTP", lambda k: client.grasps(session_id, threshold=THRESHOLD), "target"
+        name,
+        group,
+        lambda k: client.grasps(session_id, threshold=THRESHOLD),
+        "target" if new_frame else "",
+        post_frame if new_frame else None,
     )
     return operation, grasps
+
+
+# 8. Concurrent sessions ------------------------------------------------------------------------
+def throughput(url: str, frames: Frames, sessions: int, requests: int) -> dict[str, Any]:
+    """Grasp requests per second when ``sessions`` clients, each on its own session, ask
+    ``requests`` times each as fast as they can, all starting together."""
+    clients = [VGNClient(url) for _ in range(sessions)]
+    try:
+        ids = [fused_session(client, frames) for client in clients]
+        for client, session_id in zip(clients, ids, strict=True):
+            client.grasps(session_id, threshold=THRESHOLD)  # warm
+        start = threading.Barrier(sessions + 1)
+
+        def ask(index: int) -> list[float]:
+            start.wait()
+            return [
+                timed(lambda _: clients[index].grasps(ids[index], threshold=THRESHOLD), k)
+                for k in range(requests)
+            ]
+
+        with ThreadPoolExecutor(sessions) as pool:
+            futures = [pool.submit(ask, index) for index in range(sessions)]
+            start.wait()
+            began = time.perf_counter()
+            latencies = [ms for future in futures for ms in future.result()]
+            elapsed = time.perf_counter() - began
+    finally:
+        for client in clients:
+            client.close()
+    return {
+        "sessions": sessions,
+        "requests": len(latencies),
+        "requests_per_s": round(len(latencies) / elapsed, 2),
+        "p50_ms": round(float(np.percentile(latencies, 50)), 3),
+        "p95_ms": round(float(np.percentile(latencies, 95)), 3),
+    }
+
+
+def concurrency_rows(url: str, frames: Frames, requests: int) -> list[dict[str, Any]]:
+    rows = [throughput(url, frames, sessions, requests) for sessions in CONCURRENCY]
+    single = rows[0]["requests_per_s"]
+    for row in rows:
+        row["vs_one_session"] = round(row["requests_per_s"] / single, 2)
+    return rows
 
 
 # Report ------------------------------------------------------------------------------------
@@ -392,25 +541,48 @@ def find(rows: list[Measurement], name: str) -> Measurement:
     return next(row for row in rows if row.name == name)
 
 
-def targets(rows: list[Measurement]) -> list[dict[str, Any]]:
-    frame = find(rows, FRAME_HTTP).p50
-    ratio = find(rows, GRASPS_HTTP).p50 / find(rows, FORWARD_DETECTION).p50
-    return [
-        {
-            "name": "frame request over HTTP p50 (raw f32)",
-            "value": round(frame, 3),
-            "unit": "ms",
-            "target": FRAME_TARGET_MS,
-            "pass": frame <= FRAME_TARGET_MS,
-        },
-        {
-            "name": "grasp request over HTTP p50 / direct forward+detection p50",
-            "value": round(ratio, 3),
-            "unit": "x",
-            "target": GRASP_RATIO_TARGET,
-            "pass": ratio <= GRASP_RATIO_TARGET,
-        },
+def check(name: str, value: float, unit: str, target: float, at_most: bool = True) -> dict[str, Any]:
+    return {
+        "name": name,
+        "value": round(value, 3),
+        "unit": unit,
+        "target": target,
+        "at_most": at_most,
+        "pass": value <= target if at_most else value >= target,
+    }
+
+
+def targets(rows: list[Measurement], concurrency: list[dict[str, Any]], gpu: bool) -> list[dict[str, Any]]:
+    grasp = find(rows, GRASPS_HTTP).p50
+    again = find(rows, GRASPS_HTTP_AGAIN).p50
+    checks = [
+        check("frame request over HTTP p50 (raw f32)", find(rows, FRAME_HTTP).p50, "ms", FRAME_TARGET_MS),
+        check("grasp request over HTTP p50", grasp, "ms", GPU_GRASP_TARGET_MS if gpu else GRASP_TARGET_MS),
+        check(
+            "naive fp32 eager forward+detection p50 / grasp request over HTTP p50",
+            find(rows, FORWARD_DETECTION).p50 / grasp,
+            "x",
+            SPEEDUP_TARGET,
+            at_most=False,
+        ),
+        check(
+            "grasp p50, slower / faster of two server starts",
+            max(grasp, again) / min(grasp, again),
+            "x",
+            STEADY_TARGET,
+        ),  # fmt: skip
     ]
+    if gpu and concurrency:
+        checks.append(
+            check(
+                f"throughput, {CONCURRENCY[-1]} sessions / 1 session",
+                concurrency[-1]["vs_one_session"],
+                "x",
+                THROUGHPUT_TARGET,
+                at_most=False,
+            )
+        )
+    return checks
 
 
 def format_table(rows: list[Measurement]) -> str:
@@ -430,8 +602,9 @@ def format_targets(checks: list[dict[str, Any]]) -> str:
     for check in checks:
         unit = " ms" if check["unit"] == "ms" else "x"
         verdict = "PASS" if check["pass"] else "MISS"
+        relation = "<=" if check["at_most"] else ">="
         lines.append(
-            f"  {check['name']}: {check['value']:.2f}{unit} (target <= {check['target']:g}{unit})  {verdict}"
+            f"  {check['name']}: {check['value']:.2f}{unit} (target {relation} {check['target']:g}{unit})  {verdict}"
         )
     return "\n".join(lines)
 
@@ -473,8 +646,9 @@ def format_header(env: dict[str, Any]) -> str:
             f"calls per operation, schedule {env['schedule']}",
             f"  python {env['python']}, torch {env['torch']}, open3d {env['open3d']}, "
             f"{env['cpu_count']} CPU cores, device {env['device']}",
-            f"  torch threads: {env['torch_threads']} in this process and in the server "
-            "(VGN_TORCH_THREADS); benchmark and server share the cores",
+            f"  torch threads: {env['torch_threads']} in this process and in the servers; benchmark and "
+            "servers share the cores",
+            f"  server runtime: {env.get('server_runtime')}",
             f"  weights: {weights}",
             f"  input: {env['frame']} BoxScene depth frames; grid {env['grid']}; "
             f"threshold {env['threshold']}",
@@ -521,8 +695,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--threads",
         type=int,
-        default=torch.get_num_threads(),
-        help="torch threads here and in the server (default: %(default)s)",
+        default=None,
+        help="torch threads here and in the servers (default: the service's own choice)",
+    )
+    parser.add_argument(
+        "--concurrent-requests",
+        type=int,
+        default=8,
+        help="grasp requests per session in the throughput rows (0 skips them; default: %(default)s)",
     )
     parser.add_argument(
         "--device",
@@ -537,55 +717,129 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="round-robin over operations, or each operation back to back",
     )
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
+    parser.add_argument("--skip-grpc", action="store_true", help="leave out the gRPC rows")
     args = parser.parse_args(argv)
-    if args.repeats < 1 or args.warmup < 0 or args.threads < 1:
+    if args.repeats < 1 or args.warmup < 0 or (args.threads is not None and args.threads < 1):
         parser.error("--repeats and --threads must be >= 1, --warmup >= 0")
     return args
 
 
-def measure_all(args: argparse.Namespace, weights: Path) -> tuple[list[Measurement], dict[str, int]]:
-    """Every measurement in table order, and the grasp count each grasp path returns."""
+@dataclass
+class Results:
+    rows: list[Measurement]
+    grasps: dict[str, int]
+    concurrency: list[dict[str, Any]]
+    server_runtime: dict[str, Any]
+
+
+def measure_all(args: argparse.Namespace, weights: Path) -> Results:
+    """Every measurement in table order, the grasp count of each grasp path, the throughput
+    rows and what the (first) server reported about its runtime."""
     frames = render_frames()
-    core = PlanningService.from_settings(
-        Settings(model=weights, torch_threads=args.threads, device=args.device, api_key=None)
-    )
-    network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
-    plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
-    with running_service(weights, args.threads, args.device) as client:
+    with (
+        running_service(weights, args.threads, args.device) as client,
+        running_service(weights, args.threads, args.device) as second,
+    ):
+        runtime = client.model().runtime or {}
+        threads = args.threads or runtime.get("torch_threads") or configured_threads()
+        torch.set_num_threads(threads)  # the baseline gets the threads the service chose
+        args.threads = threads
+        core = PlanningService.from_settings(
+            Settings(model=weights, torch_threads=threads, device=args.device, api_key=None)
+        )
+        network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
+        plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
         grasps_http, http_grasps = http_grasp_operation(client, frames)
+        grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
+        grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, grasps_http]
+            + [plan, grasps_http, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
+        concurrency = []
+        if args.concurrent_requests:
+            # Repeated requests on unchanged sessions would be answered from kept outputs:
+            # this server runs the network for every request, to measure the batching.
+            no_reuse = {"VGN_REUSE_OUTPUT": "false"}
+            with running_service(weights, args.threads, args.device, no_reuse) as batching:
+                concurrency = concurrency_rows(batching.url, frames, args.concurrent_requests)
+        model = client.model()
+        runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
-    return rows, {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
+    grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
+    return Results(rows, grasps, concurrency, runtime)
+
+
+def format_concurrency(rows: list[dict[str, Any]]) -> str:
+    lines = [f"{'sessions':>8}{'requests':>10}{'req/s':>9}{'x one':>8}{'p50 ms':>9}{'p95 ms':>9}"]
+    for row in rows:
+        lines.append(
+            f"{row['sessions']:>8}{row['requests']:>10}{row['requests_per_s']:>9.1f}"
+            f"{row['vs_one_session']:>8.2f}{row['p50_ms']:>9.2f}{row['p95_ms']:>9.2f}"
+        )
+    return "\n".join(lines)
+
+
+def grpc_section(
+    args: argparse.Namespace, weights: Path, threads: int | None
+) -> tuple[list[Measurement], list[dict[str, Any]]]:
+    """The gRPC rows beside their HTTP twins (``benchmarks.grpc_latency``), and their targets;
+    none with ``--skip-grpc`` or without the grpc extra. Like the other servers, theirs runs
+    the default configuration unless ``--threads`` was given."""
+    if args.skip_grpc:
+        return [], []
+    try:
+        from benchmarks import grpc_latency
+    except ImportError as error:
+        print(f"gRPC rows left out: {error} (pip install 'vgn-service[grpc]')", flush=True)
+        return [], []
+    rows = grpc_latency.measure(weights, threads, args.device, render_frames(), args.repeats,
+                                args.warmup, args.schedule == "interleaved")  # fmt: skip
+    return rows, grpc_latency.targets(rows)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    torch.set_num_threads(args.threads)
     with tempfile.TemporaryDirectory(prefix="vgn-bench-") as directory:
         weights, random_weights = weights_path(args.model, Path(directory))
-        env = environment(args, weights, random_weights)
-        print(format_header(env), flush=True)
-        rows, grasps = measure_all(args, weights)
-    checks = targets(rows)
+        load_at_start = load_average()
+        requested_threads = args.threads  # measure_all replaces it with the service's choice
+        results = measure_all(args, weights)
+        grpc_rows, grpc_checks = grpc_section(args, weights, requested_threads)
+    env = environment(args, weights, random_weights)
+    env["load_average_at_start"] = load_at_start
+    env["server_runtime"] = results.server_runtime
+    gpu = str(results.server_runtime.get("device", env["device"])).startswith("cuda")
+    checks = targets(results.rows, results.concurrency, gpu)
     env["load_average_at_end"] = load_average()
+    print(format_header(env), flush=True)
     print()
-    print(format_table(rows))
+    print(format_table(results.rows))
+    grasps = results.grasps
     print(
         f"\ngrasps returned at threshold {THRESHOLD}: direct {grasps['direct']}, "
         f"in-process {grasps['in_process']}, HTTP {grasps['http']}"
     )
+    if results.concurrency:
+        print("\ngrasp requests over HTTP from concurrent sessions (micro-batched; VGN_REUSE_OUTPUT=false):")
+        print(format_concurrency(results.concurrency))
     print(f"load average at end (1/5/15 min): {env['load_average_at_end']}")
-    print("targets:")
+    print("targets:" + ("" if gpu else " (no GPU: the GPU targets are not checked)"))
     print(format_targets(checks))
+    if grpc_rows:
+        from benchmarks import grpc_latency
+
+        print("\ngRPC beside HTTP (one server serving both):")
+        print(format_table(grpc_rows))
+        print(grpc_latency.format_rates(grpc_rows))
+        print("gRPC targets:")
+        print(grpc_latency.format_targets(grpc_checks))
     if args.json is not None:
         write_json(
             args.json,
@@ -593,7 +847,9 @@ def main(argv: list[str] | None = None) -> int:
                 "environment": env,
                 "grasps": grasps,
                 "targets": checks,
-                "results": [row.as_dict() for row in rows],
+                "concurrency": results.concurrency,
+                "results": [row.as_dict() for row in results.rows],
+                "grpc": {"targets": grpc_checks, "results": [row.as_dict() for row in grpc_rows]},
             },
         )
         print(f"\nresults written to {args.json}")

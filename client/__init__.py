@@ -1,8 +1,10 @@
 """Typed client for vgn-service: ``VGNClient`` / ``AsyncVGNClient`` and the shared schemas.
 
-Installs without torch, open3d or pybullet.
+Installs without torch, open3d or pybullet; ``connect(url)`` also gives the gRPC client for
+``grpc://`` URLs (with the ``grpc`` extra).
 """
 
+from client.connect import connect
 from client.http import (
     AsyncVGNClient,
     BadRequest,
@@ -33,4 +35,5 @@ __all__ = [
     "VGNClient",
     "VGNError",
     "Workspace",
+    "connect",
 ]

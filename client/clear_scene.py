@@ -11,6 +11,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
+from client.connect import connect
 from client.embedded import EmbeddedService
 from client.http import VGNClient, VGNError
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
@@ -56,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
             except (RuntimeError, TimeoutError) as error:
                 print(f"error: {error}", file=sys.stderr)
                 return 2
-        vgn = stack.enter_context(VGNClient(url, api_key=args.api_key))
+        vgn = stack.enter_context(connect(url, api_key=args.api_key))
         readiness = vgn.ready()
         if not readiness.ready and config.planner == "vgn":
             print(

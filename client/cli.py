@@ -7,7 +7,8 @@
     vgn-client view SESSION --out v.html  # save the 3D session viewer (or open it in a browser)
     vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
 
-``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key.
+``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key;
+a ``grpc://HOST:PORT`` URL talks gRPC (needs the [grpc] extra) instead of HTTP.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pathlib import Path
 
 import httpx
 
+from client.connect import connect, is_grpc_url
 from client.http import DEFAULT_URL, VGNClient, VGNError
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
@@ -32,7 +34,7 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--url",
         default=os.environ.get("VGN_URL", DEFAULT_URL),
-        help="service address (env VGN_URL; default %(default)s)",
+        help="service address, http://... or grpc://HOST:PORT (env VGN_URL; default %(default)s)",
     )
     parser.add_argument(
         "--api-key",
@@ -51,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--model", help="weights file (sets VGN_MODEL)")
+    serve.add_argument("--grpc-port", type=int, help="gRPC port (sets VGN_GRPC_PORT; default 50051, 0: off)")
 
     status = commands.add_parser("status", help="health, readiness and model of a service")
     _add_connection(status)
@@ -191,6 +194,12 @@ def _serve(args: argparse.Namespace) -> int:
         return 2
     if args.model:
         os.environ["VGN_MODEL"] = args.model
+    if args.grpc_port is not None:
+        os.environ["VGN_GRPC_PORT"] = str(args.grpc_port)
+    os.environ.setdefault("VGN_GRPC_HOST", args.host)
+    grpc_port = os.environ.get("VGN_GRPC_PORT") or "50051"  # the service checks the value
+    grpc = f"gRPC on grpc://{os.environ['VGN_GRPC_HOST']}:{grpc_port}" if grpc_port != "0" else "gRPC off"
+    print(f"serving HTTP on http://{args.host}:{args.port}, {grpc}", file=sys.stderr)
     uvicorn.run("service.app:app", host=args.host, port=args.port)
     return 0
 
@@ -311,8 +320,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         print(f"wrote {args.destination}: {kept} grasps")
         return 0
+    if args.command == "view" and is_grpc_url(args.url):
+        print(
+            "error: the session viewer is an HTML page served over HTTP only; give the service's "
+            "http:// URL (the same sessions are reachable over both front ends)",
+            file=sys.stderr,
+        )
+        return 2
     try:
-        with VGNClient(args.url, api_key=args.api_key) as vgn:
+        with connect(args.url, api_key=args.api_key) as vgn:
             if args.command == "status":
                 return _status(vgn)
             if args.command == "sessions":
@@ -324,7 +340,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         detail = error.detail if isinstance(error.detail, str) else json.dumps(error.detail)
         print(f"error: the service answered {error.status}: {detail}", file=sys.stderr)
         return 1
-    except httpx.TransportError as error:
+    except ImportError as error:  # a grpc:// URL without the grpc extra
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except (httpx.TransportError, ConnectionError, TimeoutError) as error:
         print(f"error: cannot reach the service at {args.url}: {error}", file=sys.stderr)
         return 1
 

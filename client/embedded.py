@@ -27,7 +27,10 @@ def free_port(host: str = "127.0.0.1") -> int:
 class EmbeddedService:
     """A uvicorn child process serving ``service.app:app``; a context manager that stops it.
 
-    ``env`` adds ``VGN_*`` settings (e.g. ``{"VGN_MODEL": path}``) to the child's environment.
+    ``env`` adds ``VGN_*`` settings (e.g. ``{"VGN_MODEL": path}``) to the child's environment;
+    ``unset`` names variables of this process the child must not inherit.
+    With ``grpc=True`` the child also serves gRPC on another free port (``grpc_url``); without,
+    it serves none, so embedded services running side by side never contend for a port.
     """
 
     def __init__(
@@ -38,10 +41,16 @@ class EmbeddedService:
         port: int | None = None,
         startup_timeout: float = 120.0,
         log_path: Path | None = None,
+        unset: tuple[str, ...] = (),
+        grpc: bool = False,
     ) -> None:
         self.host, self.port = host, port or free_port(host)
         self.url = f"http://{host}:{self.port}"
-        self._env = {**os.environ, **(env or {})}
+        self.grpc_port = free_port(host) if grpc else None
+        self.grpc_url = f"grpc://{host}:{self.grpc_port}" if grpc else None
+        self._env = {name: value for name, value in os.environ.items() if name not in unset} | (env or {})
+        self._env["VGN_GRPC_PORT"] = str(self.grpc_port or 0)
+        self._env["VGN_GRPC_HOST"] = host
         if model is not None:
             self._env["VGN_MODEL"] = str(model)
         self._startup_timeout = startup_timeout

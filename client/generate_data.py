@@ -23,10 +23,10 @@ from sim_worker.gripper import GRIPPER_VERSION
 
 def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:
     """One simulator process: its own PyBullet world and client, its share of the scenes."""
-    from client.http import VGNClient
+    from client.connect import connect
     from sim_worker.datagen import generate
 
-    with VGNClient(url, api_key=api_key, timeout=120.0) as vgn:
+    with connect(url, api_key=api_key, timeout=120.0) as vgn:
         generate(vgn, RawDataset(Path(out)), config, indices,
                  report=lambda sid, grasps, seconds: reports.put((sid, grasps, seconds)))  # fmt: skip
 

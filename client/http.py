@@ -145,6 +145,10 @@ def encode_depth(depth: np.ndarray | bytes) -> tuple[bytes, str, str]:
     return np.ascontiguousarray(array, dtype="<f4").tobytes(), "depth.raw", "application/octet-stream"
 
 
+#: Header carrying a frame's meta JSON when the body is the bare depth image.
+FRAME_META_HEADER = "X-Frame-Meta"
+
+
 class Calls:
     """Request builders for every endpoint; shared by the sync and async clients."""
 
@@ -172,12 +176,15 @@ class Calls:
             depth_scale=depth_scale,
             max_depth=max_depth,
         )
-        body, filename, media_type = encode_depth(depth)
-        files = {
-            "meta": (None, meta.model_dump_json(), "application/json"),
-            "depth": (filename, body, media_type),
-        }
-        return Call("POST", f"/sessions/{session_id}/frames", _model(FrameResult), {"files": files})
+        body, _, media_type = encode_depth(depth)
+        # The bare image as the body and the meta in a header: no multipart to build or parse.
+        headers = {"Content-Type": media_type, FRAME_META_HEADER: meta.model_dump_json()}
+        return Call(
+            "POST",
+            f"/sessions/{session_id}/frames",
+            _model(FrameResult),
+            {"content": body, "headers": headers},
+        )
 
     @staticmethod
     def grasps(session_id: str, **options: Any) -> Call[GraspResult]:

@@ -279,6 +279,11 @@ class ModelInfo(_Model):
         description="from the model card beside the weights (<name>.card.json), when there is one: "
         "training date, scenes and grasps, epochs, validation figures, the command that reproduces them",
     )
+    runtime: dict[str, Any] | None = Field(
+        default=None,
+        description="how the network runs: torch threads, OpenMP wait policy (and whether the service "
+        "set it before torch loaded), inference form, precision, micro-batching window and counts",
+    )
 
 
 class Health(_Model):

@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator
+from typing import TYPE_CHECKING
 
 from fastapi import FastAPI
 from starlette.formparsers import MultiPartParser
@@ -21,6 +22,9 @@ from service.api.routes import api, health
 from service.api.viewer import viewer
 from service.core import PlanningService
 from service.settings import Settings
+
+if TYPE_CHECKING:
+    import grpc
 
 log = logging.getLogger("vgn.service")
 #: Bytes allowed beside the depth image in a frame upload (meta JSON, multipart headers).
@@ -39,11 +43,14 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
         service: PlanningService = app.state.core
         info = service.model_info()
         log.info("model: %s", f"{info.model_id} from {info.source}" if info.loaded else info.detail)
+        grpc_server = start_grpc(service, settings, app.state.metrics)
         sweeper = asyncio.create_task(_sweep_forever(service))
         try:
             yield
         finally:
             sweeper.cancel()
+            if grpc_server is not None:  # let calls in flight finish, briefly
+                await asyncio.to_thread(lambda: grpc_server.stop(grace=1.0).wait(2.0))
 
     app = FastAPI(
         title="vgn-service",
@@ -66,6 +73,22 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
     )
     app.add_middleware(RequestMetrics, metrics=app.state.metrics)
     return app
+
+
+def start_grpc(service: PlanningService, settings: Settings, metrics: ServiceMetrics) -> grpc.Server | None:
+    """The gRPC front end on the same core (``VGN_GRPC_PORT``; 0: none). Imported only when
+    wanted, so an HTTP-only install needs no grpcio; a port in use stops the start-up."""
+    if settings.grpc_port == 0:
+        return None
+    try:
+        from service.grpc.server import build_server
+    except ImportError as error:
+        raise RuntimeError(
+            f"gRPC needs the grpc extra ({error}): pip install 'vgn-service[grpc]', or set VGN_GRPC_PORT=0"
+        ) from None
+    server, port = build_server(service, settings.grpc_host, settings.grpc_port, metrics)
+    log.info("gRPC: listening on %s:%d", settings.grpc_host, port)
+    return server
 
 
 async def _sweep_forever(service: PlanningService) -> None:

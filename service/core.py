@@ -22,8 +22,15 @@ from client.schemas import (
 )
 from service.baseline import plan_antipodal
 from service.depth import decode_depth
-from service.errors import InvalidInput, ModelNotReady
-from service.planner import NO_MODEL_MESSAGE, GraspPlanner, antipodal_config, resolved_threshold
+from service.errors import InvalidInput, ModelNotReady, SessionNotFound
+from service.planner import (
+    NO_MODEL_MESSAGE,
+    GraspPlanner,
+    InferenceOptions,
+    antipodal_config,
+    resolved_threshold,
+)
+from service.runtime import configured_threads, runtime_report
 from service.sessions import SessionStore
 from service.settings import Settings
 
@@ -53,11 +60,13 @@ class PlanningService:
     @classmethod
     def from_settings(cls, settings: Settings) -> PlanningService:
         """Load the configured model (raises ``CheckpointError`` if it cannot be loaded)."""
-        if settings.torch_threads:
-            import torch
+        import torch
 
-            torch.set_num_threads(settings.torch_threads)
-        return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device))
+        torch.set_num_threads(settings.torch_threads or configured_threads())
+        options = InferenceOptions(
+            settings.inference, settings.precision, settings.batch_window_ms, settings.max_batch
+        )
+        return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
 
     # Sessions -----------------------------------------------------------------------------
     def create_session(self, spec: SessionCreate) -> SessionInfo:
@@ -118,8 +127,7 @@ class PlanningService:
             started = time.perf_counter()
             session.volume.integrate(depth, intrinsics, camera_pose, max_depth)
             elapsed_ms = (time.perf_counter() - started) * 1e3
-            session.frame_count += 1
-            session.integration_ms += elapsed_ms
+            session.fused_frame(elapsed_ms)
             return FrameResult(session_id=session_id, frame_count=session.frame_count,
                                integration_ms=round(elapsed_ms, 3))  # fmt: skip
 
@@ -154,13 +162,18 @@ class PlanningService:
             observed = session.volume.cloud() if baseline else session.volume.grid()
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             frame_count, integration_ms = session.frame_count, session.integration_ms
+            revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
         if baseline:
             config = antipodal_config(query)
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
             threshold = config.threshold
         else:
-            grasps, _ = self.planner.plan(observed, voxel_size, workspace_pose, query)
+            reuse = self.settings.reuse_output and kept is not None and kept[0] == revision
+            output = kept[1] if reuse else self.planner.infer(observed)
+            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, query)
+            if self.settings.reuse_output and not reuse:
+                self._keep_output(session_id, revision, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
         return GraspResult(
@@ -171,6 +184,16 @@ class PlanningService:
             model=model,
             threshold=threshold,
         )
+
+    def _keep_output(self, session_id: str, revision: int, output: object) -> None:
+        """Keep a session's network output for the next request, unless a frame arrived
+        (or the session went) while the network ran."""
+        try:
+            with self.sessions.use(session_id) as session:
+                if session.revision == revision:
+                    session.network_output = (revision, output)
+        except SessionNotFound:
+            pass
 
     def model_info(self) -> ModelInfo:
         return ModelInfo(
@@ -184,4 +207,5 @@ class PlanningService:
             conventions=CONVENTIONS,
             threshold=self.planner.default_threshold,
             card=self.planner.card,
+            runtime={**runtime_report(), **self.planner.runtime()},
         )

@@ -9,6 +9,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from typing import Any
 
 from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
@@ -29,11 +30,25 @@ class Session:
     integration_ms: float = 0.0
     users: int = 0  # requests holding or waiting for the session; only idle ones are evicted
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    #: Bumped by every change of the volume (frame, reset): what a kept network output is for.
+    revision: int = 0
+    #: (revision, output) of the last forward pass on this session's grid, reused until the
+    #: volume changes (planning again without a new frame costs detection only).
+    network_output: tuple[int, Any] | None = field(default=None, repr=False)
 
     def reset(self) -> None:
         self.volume.reset()
         self.frame_count = 0
         self.integration_ms = 0.0
+        self.revision += 1
+        self.network_output = None
+
+    def fused_frame(self, elapsed_ms: float) -> None:
+        """Account for a frame just fused into the volume."""
+        self.frame_count += 1
+        self.integration_ms += elapsed_ms
+        self.revision += 1
+        self.network_output = None
 
     def info(self, ttl_s: float) -> SessionInfo:
         return SessionInfo(

@@ -25,11 +25,41 @@ class Settings(BaseSettings):
         "when unset the packaged default is used; 'none' serves without a model (antipodal planner only)",
     )
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device")
-    torch_threads: int | None = Field(default=None, ge=1, description="torch intra-op threads")
+    torch_threads: int | None = Field(
+        default=None, ge=1, description="torch intra-op threads; unset: half the usable cores, 1 to 8"
+    )
+    inference: Literal["fast", "reference"] = Field(
+        default="fast",
+        description="'fast': the network folded for inference (same grasps, ~4x less arithmetic); "
+        "'reference': VGN as trained, float32",
+    )
+    precision: Literal["auto", "fp32", "bf16"] = Field(
+        default="auto", description="of the fast form; auto: bf16 on CPUs with native bf16, else fp32"
+    )
+    batch_window_ms: float | None = Field(
+        default=None,
+        ge=0,
+        le=1000,
+        description="how long a grasp request waits for others to share its forward pass; "
+        "unset: 2 ms on a GPU, 0 on a CPU",
+    )
+    max_batch: int = Field(default=32, ge=1, le=256, description="most grids in one forward pass")
+    reuse_output: bool = Field(
+        default=True,
+        description="answer a grasp request on a session whose volume has not changed since the last one "
+        "from that one's network output (detection only)",
+    )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")
     max_frame_bytes: int = Field(default=32 * 1024 * 1024, ge=1024, description="largest request body")
     api_key: str | None = Field(default=None, description="when set, required as X-API-Key or Bearer token")
+    grpc_port: int = Field(
+        default=50051,
+        ge=0,
+        le=65535,
+        description="port of the gRPC front end, started with the app; 0 turns it off",
+    )
+    grpc_host: str = Field(default="127.0.0.1", description="address the gRPC front end listens on")
     cloud_resolution: int = Field(
         default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,6 +18,9 @@ from service.settings import Settings
 from service.vgn.checkpoint import save_vgn
 from service.vgn.network import VGN
 
+# Apps built in tests start no gRPC server unless a test asks: test processes run side by side
+# and would all want the default port. Tests that serve gRPC pick a free port.
+os.environ["VGN_GRPC_PORT"] = "0"
 warnings.filterwarnings("ignore", message=".*httpx2.*")
 from fastapi.testclient import TestClient  # noqa: E402
 

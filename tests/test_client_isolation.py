@@ -1,4 +1,4 @@
-"""The client must import and work without torch, open3d or pybullet (robot-side installs)."""
+"""The client must import and work without torch, open3d, pybullet or grpcio (robot-side installs)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ def test_client_runs_without_heavy_dependencies(server):
         class Blocked:
             # Any import of these packages raises ImportError, as if they were not installed.
             def find_spec(self, name, path=None, target=None):
-                if name.split(".")[0] in ("torch", "open3d", "pybullet", "service", "fastapi"):
+                if name.split(".")[0] in ("torch", "open3d", "pybullet", "service", "fastapi", "grpc", "grpc_health"):
                     raise ImportError(name + " is not installed")
 
         sys.meta_path.insert(0, Blocked())

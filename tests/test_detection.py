@@ -134,3 +134,36 @@ def test_approach_cone_in_world_frame(direction, kept):
 def test_empty_output():
     assert detect(free_space_grid(), *outputs({})) == []
     assert detect(np.zeros((N, N, N), np.float32), *outputs({(20, 20, 11): 0.99})) == []
+
+
+@pytest.mark.parametrize("size", [2, 3, 4, 5])
+def test_local_maxima_are_those_of_scipy_s_maximum_filter(size):
+    """NMS looks only around positive voxels; it must find what the full filter finds,
+    borders (reflected) and ties included."""
+    from scipy import ndimage
+
+    from service.vgn.detection import local_maxima
+
+    rng = np.random.default_rng(size)
+    score = np.where(rng.random((N, N, N)) < 0.05, rng.random((N, N, N)), 0.0).astype(np.float32)
+    score[0, 0, :3] = 0.7  # ties at a corner
+    score[N - 1, 5, N - 1] = 0.9
+    expected = np.argwhere((score == ndimage.maximum_filter(score, size=size)) & (score > 0))
+    actual = local_maxima(score, size)
+    assert sorted(map(tuple, actual)) == sorted(map(tuple, expected))
+    assert len(local_maxima(np.zeros((N, N, N), np.float32), size)) == 0
+
+
+def test_the_grasp_region_is_scipy_s_masked_dilation():
+    from scipy import ndimage
+
+    from service.vgn.detection import grasp_region
+
+    rng = np.random.default_rng(7)
+    grid = rng.choice([0.0, 0.3, 0.8], size=(N, N, N), p=[0.6, 0.2, 0.2]).astype(np.float32)
+    grid[0, :, :] = 0.8  # borders
+    for steps in (1, 2, 3):
+        config = DetectionConfig(surface_dilation=steps)
+        inside = (grid > 1e-3) & (grid < 0.5)
+        expected = ndimage.binary_dilation(grid > 0.5, iterations=steps, mask=~inside)
+        assert np.array_equal(grasp_region(grid, config), expected)

@@ -32,6 +32,9 @@ from service.core import PlanningService
 from service.errors import InvalidInput, UnsupportedMediaType
 
 NPY_MEDIA_TYPE = "application/x-npy"
+#: A frame may also be sent as the bare depth image, its meta JSON in this header.
+FRAME_META_HEADER = "X-Frame-Meta"
+RAW_BODY_TYPES = ("application/octet-stream", "image/png")
 PLY_MEDIA_TYPE = "application/x-ply"
 
 
@@ -149,30 +152,55 @@ FRAME_BODY = {
                         },
                     },
                 }
-            }
+            },
+            "application/octet-stream": {
+                "schema": {
+                    "type": "string",
+                    "format": "binary",
+                    "description": "float32 metres, meta in X-Frame-Meta",
+                }
+            },
+            "image/png": {
+                "schema": {
+                    "type": "string",
+                    "format": "binary",
+                    "description": "16-bit PNG, meta in X-Frame-Meta",
+                }
+            },
         },
-    }
+    },
+    "parameters": [
+        {
+            "name": FRAME_META_HEADER,
+            "in": "header",
+            "required": False,
+            "schema": {"type": "string"},
+            "description": "JSON FrameMeta, required when the body is the bare depth image",
+        }
+    ],
 }
 
 
 @api.post("/sessions/{session_id}/frames", response_model=FrameResult, openapi_extra=FRAME_BODY)
 async def add_frame(service: Core, session_id: str, request: Request):
-    """Fuse one depth frame. Multipart parts: ``meta`` (JSON) and ``depth`` (a file part)."""
+    """Fuse one depth frame: multipart parts ``meta`` (JSON) and ``depth`` (a file part), or
+    the depth image as the whole body (``application/octet-stream`` float32 or ``image/png``)
+    with the meta JSON in the ``X-Frame-Meta`` header, which saves the multipart round."""
     media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    if media_type != "multipart/form-data":
+    if media_type in RAW_BODY_TYPES:
+        meta_text = request.headers.get(FRAME_META_HEADER)
+        if meta_text is None:
+            raise InvalidInput(
+                f"a {media_type} frame body needs its meta as JSON in the {FRAME_META_HEADER} header"
+            )
+        data, content_type = await request.body(), media_type
+    elif media_type == "multipart/form-data":
+        meta_text, data, content_type = await _multipart_frame(request)
+    else:
         raise UnsupportedMediaType(
-            f"frames must be multipart/form-data, got {media_type or 'no content type'!r}"
+            "frames must be multipart/form-data, or a raw depth body (application/octet-stream or "
+            f"image/png) with the {FRAME_META_HEADER} header; got {media_type or 'no content type'!r}"
         )
-    try:
-        form = await request.form(
-            max_files=4, max_fields=8, max_part_size=request.app.state.settings.max_frame_bytes
-        )
-    except MultiPartException as error:
-        raise InvalidInput(f"malformed multipart body: {error.message}") from None
-    try:
-        meta_text, data, content_type = await _frame_parts(form)
-    finally:
-        await form.close()
     limit = request.app.state.settings.max_frame_bytes
     if len(data) > limit:
         raise HTTPException(
@@ -185,6 +213,20 @@ async def add_frame(service: Core, session_id: str, request: Request):
     result = await run_in_threadpool(service.add_encoded_frame, session_id, data, content_type, meta)
     metrics(request).integration.observe(result.integration_ms / 1e3)
     return result
+
+
+async def _multipart_frame(request: Request) -> tuple[str | bytes, bytes, str]:
+    """The meta JSON, depth bytes and depth media type of a multipart frame upload."""
+    try:
+        form = await request.form(
+            max_files=4, max_fields=8, max_part_size=request.app.state.settings.max_frame_bytes
+        )
+    except MultiPartException as error:
+        raise InvalidInput(f"malformed multipart body: {error.message}") from None
+    try:
+        return await _frame_parts(form)
+    finally:
+        await form.close()
 
 
 @api.get("/sessions/{session_id}/grasps", response_model=GraspResult)

@@ -1,0 +1,33 @@
+"""One entry point for every place that takes a service URL: the scheme picks the transport.
+
+``http://`` / ``https://`` give a ``VGNClient``; ``grpc://`` / ``grpcs://`` a ``GRPCClient``
+(imported only then, so the base install needs no grpcio).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from client.http import VGNClient
+
+if TYPE_CHECKING:
+    from client.grpc_client import GRPCClient
+
+GRPC_SCHEMES = ("grpc://", "grpcs://")
+
+
+def is_grpc_url(url: str) -> bool:
+    return url.lower().startswith(GRPC_SCHEMES)
+
+
+def connect(url: str, api_key: str | None = None, timeout: float = 30.0) -> VGNClient | GRPCClient:
+    """A client for ``url``; both kinds have the same methods and return types."""
+    if not is_grpc_url(url):
+        return VGNClient(url, api_key=api_key, timeout=timeout)
+    try:
+        from client.grpc_client import GRPCClient
+    except ImportError as error:
+        raise ImportError(
+            f"grpc:// URLs need the grpc extra ({error}): pip install 'vgn-service[grpc]'"
+        ) from None
+    return GRPCClient(url, api_key=api_key, timeout=timeout)

@@ -1,0 +1,251 @@
+"""Conversions between the protobuf messages and the wire schemas of ``client.schemas``.
+
+Incoming messages become plain dicts that are validated by the same pydantic models as the
+HTTP API, so both front ends accept and reject exactly the same input with the same messages.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from client.grpc_api import grasp_planning_pb2 as pb
+from client.schemas import (
+    FrameResult,
+    GraspQuery,
+    GraspResult,
+    Intrinsics,
+    ModelInfo,
+    Pose,
+    SessionInfo,
+    SessionList,
+    Workspace,
+)
+
+RAW_MEDIA_TYPE = "application/octet-stream"
+PNG_MEDIA_TYPE = "image/png"
+MEDIA_TYPE_OF_ENCODING = {
+    pb.DEPTH_ENCODING_RAW_FLOAT32: RAW_MEDIA_TYPE,
+    pb.DEPTH_ENCODING_PNG16: PNG_MEDIA_TYPE,
+}
+ENCODING_OF_MEDIA_TYPE = {media: encoding for encoding, media in MEDIA_TYPE_OF_ENCODING.items()}
+PLANNER_NAMES = {pb.PLANNER_UNSPECIFIED: "vgn", pb.PLANNER_VGN: "vgn", pb.PLANNER_ANTIPODAL: "antipodal"}
+PLANNERS = {"vgn": pb.PLANNER_VGN, "antipodal": pb.PLANNER_ANTIPODAL}
+
+
+# protobuf -> dicts the schemas validate ------------------------------------------------------
+def vector(message: pb.Vector3) -> list[float]:
+    return [message.x, message.y, message.z]
+
+
+def vector_text(message: pb.Vector3) -> str:
+    """The 'x,y,z' form of the HTTP query parameters; ``repr`` keeps every bit of a double."""
+    return ",".join(repr(value) for value in vector(message))
+
+
+def pose_dict(message: pb.Pose) -> dict[str, Any]:
+    data: dict[str, Any] = {}
+    if message.HasField("position"):
+        data["position"] = vector(message.position)
+    if message.HasField("orientation"):
+        q = message.orientation
+        data["orientation"] = [q.x, q.y, q.z, q.w]
+    return data
+
+
+def intrinsics_dict(message: pb.Intrinsics) -> dict[str, Any]:
+    return {name: getattr(message, name) for name in ("width", "height", "fx", "fy", "cx", "cy")}
+
+
+def optional_fields(message: Any, names: tuple[str, ...]) -> dict[str, Any]:
+    """The explicitly set ``optional`` fields of ``message``; unset ones take the schema defaults."""
+    return {name: getattr(message, name) for name in names if message.HasField(name)}
+
+
+def workspace_dict(message: pb.Workspace) -> dict[str, Any]:
+    data = optional_fields(message, ("size", "resolution"))
+    if message.HasField("pose"):
+        data["pose"] = pose_dict(message.pose)
+    return data
+
+
+def session_create_dict(message: pb.CreateSessionRequest) -> dict[str, Any]:
+    data = optional_fields(message, ("session_id",))
+    if message.HasField("workspace"):
+        data["workspace"] = workspace_dict(message.workspace)
+    if message.HasField("intrinsics"):
+        data["intrinsics"] = intrinsics_dict(message.intrinsics)
+    return data
+
+
+def frame_meta_dict(message: pb.Frame) -> dict[str, Any]:
+    data = optional_fields(message, ("depth_scale", "max_depth"))
+    if message.HasField("camera_pose"):
+        data["camera_pose"] = pose_dict(message.camera_pose)
+    if message.HasField("intrinsics"):
+        data["intrinsics"] = intrinsics_dict(message.intrinsics)
+    return data
+
+
+def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
+    data = optional_fields(message, ("threshold", "max_grasps", "nms_size", "max_approach_angle"))
+    data["planner"] = PLANNER_NAMES.get(message.planner, f"unknown planner {message.planner}")
+    for name in ("crop_min", "crop_max", "approach"):
+        if message.HasField(name):
+            data[name] = vector_text(getattr(message, name))
+    return data
+
+
+# schemas -> protobuf ------------------------------------------------------------------------
+def vector3(values: list[float] | tuple[float, ...]) -> pb.Vector3:
+    x, y, z = values
+    return pb.Vector3(x=x, y=y, z=z)
+
+
+def quaternion(values: list[float]) -> pb.Quaternion:
+    x, y, z, w = values
+    return pb.Quaternion(x=x, y=y, z=z, w=w)
+
+
+def pose_message(pose: Pose) -> pb.Pose:
+    return pb.Pose(position=vector3(pose.position), orientation=quaternion(pose.orientation))
+
+
+def intrinsics_message(intrinsics: Intrinsics | None) -> pb.Intrinsics | None:
+    return None if intrinsics is None else pb.Intrinsics(**intrinsics.model_dump())
+
+
+def workspace_message(workspace: Workspace) -> pb.Workspace:
+    return pb.Workspace(
+        size=workspace.size, resolution=workspace.resolution, pose=pose_message(workspace.pose)
+    )
+
+
+def session_message(info: SessionInfo) -> pb.Session:
+    return pb.Session(
+        session_id=info.session_id,
+        workspace=workspace_message(info.workspace),
+        intrinsics=intrinsics_message(info.intrinsics),
+        frame_count=info.frame_count,
+        integration_ms=info.integration_ms,
+        created_at=info.created_at,
+        last_used_at=info.last_used_at,
+        expires_at=info.expires_at,
+    )
+
+
+def frame_result_message(result: FrameResult) -> pb.FrameResult:
+    return pb.FrameResult(**result.model_dump())
+
+
+def grasp_result_message(result: GraspResult) -> pb.GraspResult:
+    grasps = [
+        pb.Grasp(
+            position=vector3(g.position),
+            orientation=quaternion(g.orientation),
+            approach=vector3(g.approach),
+            width=g.width,
+            quality=g.quality,
+        )
+        for g in result.grasps
+    ]
+    return pb.GraspResult(grasps=grasps, **result.model_dump(exclude={"grasps"}))
+
+
+def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
+    message = pb.GraspQuery(session_id=session_id, planner=PLANNERS[query.planner])
+    for name in ("threshold", "max_grasps", "max_approach_angle"):
+        if getattr(query, name) is not None:
+            setattr(message, name, getattr(query, name))
+    message.nms_size = query.nms_size
+    crop_min, crop_max = query.crop_box or (None, None)
+    for name, values in (
+        ("crop_min", crop_min),
+        ("crop_max", crop_max),
+        ("approach", query.approach_direction),
+    ):
+        if values is not None:
+            getattr(message, name).CopyFrom(vector3(values))
+    return message
+
+
+def model_info_message(info: ModelInfo) -> pb.ModelInfo:
+    data = info.model_dump(exclude={"card", "runtime"}, exclude_none=True)
+    card_json = None if info.card is None else json.dumps(info.card)
+    runtime_json = None if info.runtime is None else json.dumps(info.runtime)
+    return pb.ModelInfo(card_json=card_json, runtime_json=runtime_json, **data)
+
+
+def array_bytes(array: np.ndarray) -> bytes:
+    return np.ascontiguousarray(array, dtype="<f4").tobytes()
+
+
+# protobuf -> schemas (the client's answers) -------------------------------------------------
+def session_info(message: pb.Session) -> SessionInfo:
+    return SessionInfo(
+        session_id=message.session_id,
+        workspace=Workspace.model_validate(workspace_dict(message.workspace)),
+        intrinsics=intrinsics_dict(message.intrinsics) if message.HasField("intrinsics") else None,
+        frame_count=message.frame_count,
+        integration_ms=message.integration_ms,
+        created_at=message.created_at,
+        last_used_at=message.last_used_at,
+        expires_at=message.expires_at,
+    )
+
+
+def session_list(message: pb.ListSessionsResponse) -> SessionList:
+    return SessionList(
+        sessions=[session_info(s) for s in message.sessions], max_sessions=message.max_sessions
+    )
+
+
+def frame_result(message: pb.FrameResult) -> FrameResult:
+    return FrameResult(
+        session_id=message.session_id, frame_count=message.frame_count, integration_ms=message.integration_ms
+    )
+
+
+def grasp_result(message: pb.GraspResult) -> GraspResult:
+    grasps = [
+        {
+            "position": vector(g.position),
+            "orientation": [g.orientation.x, g.orientation.y, g.orientation.z, g.orientation.w],
+            "approach": vector(g.approach),
+            "width": g.width,
+            "quality": g.quality,
+        }
+        for g in message.grasps
+    ]
+    return GraspResult(
+        grasps=grasps,
+        planning_ms=message.planning_ms,
+        integration_ms=message.integration_ms,
+        frame_count=message.frame_count,
+        model=message.model,
+        threshold=message.threshold,
+    )
+
+
+def model_info(message: pb.ModelInfo) -> ModelInfo:
+    data = optional_fields(message, ("model_id", "source", "detail"))
+    return ModelInfo(
+        loaded=message.loaded,
+        model_id=data.get("model_id"),
+        source=data.get("source"),
+        architecture=message.architecture,
+        parameters=message.parameters,
+        device=message.device,
+        detail=data.get("detail"),
+        conventions=dict(message.conventions),
+        threshold=message.threshold,
+        card=json.loads(message.card_json) if message.HasField("card_json") else None,
+        runtime=json.loads(message.runtime_json) if message.HasField("runtime_json") else None,
+    )
+
+
+def float_array(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
+    """A writable float32 array of little-endian ``data``."""
+    return np.frombuffer(data, dtype="<f4").reshape(shape).astype(np.float32)

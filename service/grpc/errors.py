@@ -1,0 +1,125 @@
+"""Map the planning core's errors to gRPC status codes, with the HTTP API's messages.
+
+Every error also carries the HTTP status the same failure gets over HTTP, as trailing
+metadata ``vgn-http-status``, so a client can raise the same exception type for both.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import secrets
+import time
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import grpc
+from pydantic import ValidationError
+
+from client.grpc_api import grasp_planning_pb2 as pb
+from service.api.errors import STATUS_OF, field_errors
+from service.errors import (
+    CapacityExceeded,
+    InvalidInput,
+    ModelNotReady,
+    ServiceError,
+    SessionExists,
+    SessionNotFound,
+    UnsupportedMediaType,
+)
+from service.settings import Settings
+from service.vgn.checkpoint import CheckpointError
+
+log = logging.getLogger("vgn.service")
+
+HTTP_STATUS_KEY = "vgn-http-status"
+API_KEY_MESSAGE = "missing or wrong API key (x-api-key or authorization: Bearer metadata)"
+
+CODE_OF: dict[type[ServiceError], grpc.StatusCode] = {
+    InvalidInput: grpc.StatusCode.INVALID_ARGUMENT,
+    UnsupportedMediaType: grpc.StatusCode.INVALID_ARGUMENT,
+    SessionNotFound: grpc.StatusCode.NOT_FOUND,
+    SessionExists: grpc.StatusCode.ALREADY_EXISTS,
+    CapacityExceeded: grpc.StatusCode.RESOURCE_EXHAUSTED,
+    ModelNotReady: grpc.StatusCode.UNAVAILABLE,
+}
+
+
+class PayloadTooLarge(ServiceError):
+    """A frame's depth bytes exceed ``VGN_MAX_FRAME_BYTES`` (HTTP 413)."""
+
+
+CODE_OF[PayloadTooLarge] = grpc.StatusCode.RESOURCE_EXHAUSTED
+HTTP_STATUS_OF = {**STATUS_OF, PayloadTooLarge: 413}
+
+
+def validation_message(error: ValidationError) -> str:
+    """The one-line summary the HTTP API sends as a 422's ``message``."""
+    return field_errors(list(error.errors()))[1]
+
+
+def abort(context: grpc.ServicerContext, code: grpc.StatusCode, message: str, http_status: int) -> None:
+    context.set_trailing_metadata(((HTTP_STATUS_KEY, str(http_status)),))
+    context.abort(code, message)
+
+
+def api_key_of(context: grpc.ServicerContext) -> str | None:
+    metadata = {key.lower(): value for key, value in context.invocation_metadata()}
+    given = metadata.get("x-api-key")
+    authorization = metadata.get("authorization", "")
+    if given is None and authorization.lower().startswith("bearer "):
+        given = authorization[7:].strip()
+    return given
+
+
+F = TypeVar("F", bound=Callable[..., Any])
+#: (code, message, HTTP status) of a refused call.
+Failure = tuple[grpc.StatusCode, str, int]
+SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GraspPlanning"].full_name
+
+
+def refusal(settings: Settings, context: grpc.ServicerContext) -> Failure | None:
+    """Why a call must not run: a missing or wrong API key, or a deadline already past."""
+    expected = settings.api_key
+    if expected is not None:
+        given = api_key_of(context)
+        if given is None or not secrets.compare_digest(given.encode(), expected.encode()):
+            return grpc.StatusCode.UNAUTHENTICATED, API_KEY_MESSAGE, 401
+    remaining = context.time_remaining()
+    if remaining is not None and remaining <= 0:
+        return grpc.StatusCode.DEADLINE_EXCEEDED, "the deadline passed before the call ran", 504
+    return None
+
+
+def rpc(method: F) -> F:
+    """Run a servicer method with the API key checked, the client's deadline respected and
+    every error turned into a status code; counted in the app's request metrics (method
+    ``GRPC``, route ``/vgn.v1.GraspPlanning/<Method>``, status the code's name)."""
+    route = f"/{SERVICE_NAME}/{method.__name__}"
+
+    @functools.wraps(method)
+    def wrapper(self, request: Any, context: grpc.ServicerContext) -> Any:
+        started = time.perf_counter()
+        failure, result = refusal(self.settings, context), None
+        if failure is None:
+            try:
+                result = method(self, request, context)
+            except ServiceError as error:
+                kind = next((k for k in CODE_OF if isinstance(error, k)), InvalidInput)
+                failure = CODE_OF[kind], str(error), HTTP_STATUS_OF.get(kind, 400)
+            except ValidationError as error:
+                failure = grpc.StatusCode.INVALID_ARGUMENT, validation_message(error), 422
+            except CheckpointError as error:
+                failure = grpc.StatusCode.UNAVAILABLE, str(error), 503
+            except Exception as error:  # a bug: say so, as the HTTP app's 500 does
+                log.exception("unhandled error in %s", route)
+                failure = grpc.StatusCode.INTERNAL, f"internal error: {type(error).__name__}", 500
+        if self.metrics is not None:
+            code = failure[0] if failure else grpc.StatusCode.OK
+            self.metrics.requests.labels("GRPC", route, code.name).inc()
+            self.metrics.latency.labels("GRPC", route).observe(time.perf_counter() - started)
+        if failure is not None:
+            abort(context, *failure)
+        return result
+
+    return wrapper  # type: ignore[return-value]

@@ -1,0 +1,126 @@
+"""An inference-only form of VGN, derived from its weights at load, that computes the same
+function with about a quarter of the arithmetic.
+
+Why it is exact: in VGN's decoder every convolution after the first reads a ×2 *nearest*
+upsampled tensor, and so do the three 5³ output heads. A convolution over a nearest-upsampled
+input equals, for each of the 8 output parities, a 3³ convolution over the low-resolution
+input whose taps are sums of the original taps ("polyphase" form); zero padding maps onto
+zero padding. Stacking the 8 parities as output channels and interleaving them afterwards
+(a 3-D pixel shuffle) gives the upsampled result without ever convolving at the high
+resolution. The three heads are also fused into one 6-channel convolution. Only rounding
+differs from :class:`service.vgn.network.VGN`.
+
+Optionally the convolutions run in bfloat16 on CPUs with native bf16 support (AVX512-BF16 or
+AMX), with inputs and outputs kept in float32.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from service.vgn.network import VGN
+
+#: Channel split of the fused head: quality, rotation (4), width.
+HEAD_CHANNELS = (1, 4, 1)
+#: ``F.normalize``'s floor on the norm, kept so near-zero rotations come out alike.
+NORM_EPS = 1e-12
+
+
+def _phase_taps(kernel: int) -> torch.Tensor:
+    """(2, 3, kernel) 0/1 matrix: for output parity p and low-resolution offset o ∈ {-1, 0, 1},
+    which of the kernel's taps over the upsampled input land on low-resolution voxel i + o."""
+    taps = torch.zeros(2, 3, kernel)
+    half = kernel // 2
+    for parity in range(2):
+        for tap in range(kernel):
+            offset = (parity + tap - half) // 2
+            if not -1 <= offset <= 1:
+                raise ValueError(f"kernel {kernel} reaches beyond one low-resolution neighbour")
+            taps[parity, offset + 1, tap] = 1.0
+    return taps
+
+
+def polyphase_weights(weight: torch.Tensor, bias: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Weights of a 3³ convolution on the low-resolution input that yields, as 8 channel groups
+    per output channel (channel ``c * 8 + px * 4 + py * 2 + pz``), a padded odd-kernel
+    convolution of the ×2 nearest-upsampled input."""
+    out_channels, in_channels, kernel = weight.shape[0], weight.shape[1], weight.shape[2]
+    taps = _phase_taps(kernel).to(weight.dtype)
+    # w[c, i, px, py, pz, a, b, c'] = sum_t,u,v taps[px, a, t] taps[py, b, u] taps[pz, c', v] W[c, i, t, u, v]
+    phased = torch.einsum("xat,ybu,zcv->xyzabctuv", taps, taps, taps)
+    folded = torch.einsum("xyzabctuv,oituv->oxyziabc", phased, weight)
+    folded = folded.reshape(out_channels * 8, in_channels, 3, 3, 3)
+    return folded.contiguous(), bias.repeat_interleave(8).contiguous()
+
+
+def pixel_shuffle_3d(x: torch.Tensor) -> torch.Tensor:
+    """(B, C·8, n, n, n) with parity channels → (B, C, 2n, 2n, 2n)."""
+    batch, channels, d, h, w = x.shape
+    c = channels // 8
+    x = x.reshape(batch, c, 2, 2, 2, d, h, w).permute(0, 1, 5, 2, 6, 3, 7, 4)
+    return x.reshape(batch, c, 2 * d, 2 * h, 2 * w)
+
+
+def _fused_head(network: VGN) -> tuple[torch.Tensor, torch.Tensor]:
+    heads = (network.conv_qual, network.conv_rot, network.conv_width)
+    weight = torch.cat([head.weight for head in heads])
+    bias = torch.cat([head.bias for head in heads])
+    return weight, bias
+
+
+class FastVGN(nn.Module):
+    """Same input and outputs as :class:`VGN` (eval only); built with :meth:`from_vgn`."""
+
+    def __init__(self, network: VGN, dtype: torch.dtype = torch.float32) -> None:
+        super().__init__()
+        self.dtype = dtype
+        encoder, decoder = network.encoder, network.decoder
+        with torch.no_grad():
+            self._plain = [
+                (encoder.conv1.weight, encoder.conv1.bias, 2, 2),
+                (encoder.conv2.weight, encoder.conv2.bias, 2, 1),
+                (encoder.conv3.weight, encoder.conv3.bias, 2, 1),
+                (decoder.conv1.weight, decoder.conv1.bias, 1, 1),
+            ]
+            self._folded = [
+                polyphase_weights(decoder.conv2.weight, decoder.conv2.bias),
+                polyphase_weights(decoder.conv3.weight, decoder.conv3.bias),
+                polyphase_weights(*_fused_head(network)),
+            ]
+        for index, (weight, bias, _, _) in enumerate(self._plain):
+            self.register_buffer(f"plain{index}_w", weight.detach().to(dtype).clone())
+            self.register_buffer(f"plain{index}_b", bias.detach().to(dtype).clone())
+        for index, (weight, bias) in enumerate(self._folded):
+            self.register_buffer(f"folded{index}_w", weight.detach().to(dtype))
+            self.register_buffer(f"folded{index}_b", bias.detach().to(dtype))
+        self._strides = [(stride, padding) for _, _, stride, padding in self._plain]
+        del self._plain, self._folded
+
+    @classmethod
+    def from_vgn(cls, network: VGN, dtype: torch.dtype = torch.float32) -> FastVGN:
+        return cls(network.eval(), dtype).eval()
+
+    def forward(self, grid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        x = grid.to(self.dtype)
+        for index, (stride, padding) in enumerate(self._strides):
+            weight, bias = getattr(self, f"plain{index}_w"), getattr(self, f"plain{index}_b")
+            x = F.relu(F.conv3d(x, weight, bias, stride=stride, padding=padding))
+        # decoder.conv2, decoder.conv3 and the heads read upsampled inputs: each runs folded at
+        # the lower resolution, and its 8 parities are interleaved afterwards.
+        for index in range(2):
+            weight, bias = getattr(self, f"folded{index}_w"), getattr(self, f"folded{index}_b")
+            x = pixel_shuffle_3d(F.relu(F.conv3d(x, weight, bias, padding=1)))
+        heads = F.conv3d(x, self.folded2_w, self.folded2_b, padding=1).float()
+        # The activations work per voxel, so they run before the interleaving, on contiguous
+        # parity groups.
+        batch, _, d, h, w = heads.shape
+        quality, rotation, width = heads.reshape(batch, 6, 8, d, h, w).split(HEAD_CHANNELS, dim=1)
+        # Summed by hand: torch's norm over a short non-innermost dimension is ~100x slower.
+        squares = rotation.square()
+        norm = (squares[:, 0] + squares[:, 1] + squares[:, 2] + squares[:, 3]).sqrt_().clamp_min_(NORM_EPS)
+        norm = norm[:, None]
+        heads = torch.cat([torch.sigmoid(quality), rotation / norm, width], dim=1)
+        quality, rotation, width = pixel_shuffle_3d(heads.reshape(batch, 48, d, h, w)).split(HEAD_CHANNELS, 1)
+        return quality, rotation, width
