@@ -2,7 +2,7 @@
 
 The service validates requests with these models and builds its responses from them; the
 client builds requests and parses responses with the same models, so the two cannot drift.
-Frames and units follow DESIGN §2: metres, radians (degrees only where a field says so),
+Frames and units follow docs/conventions.md: metres, radians (degrees only where a field says so),
 quaternions ``[x, y, z, w]``, camera poses camera→world in the OpenCV optical frame.
 """
 
@@ -103,7 +103,7 @@ class Intrinsics(_Model):
 
 class Workspace(_Model):
     """The cube that is fused and searched for grasps: side ``size`` metres, ``resolution``
-    voxels a side, its corner at ``pose`` in the world (DESIGN §2)."""
+    voxels a side, its corner at ``pose`` in the world (docs/conventions.md)."""
 
     size: FiniteFloat = Field(default=0.30, gt=0.01, le=5.0, description="side length in metres")
     resolution: int = Field(
@@ -238,7 +238,7 @@ class GraspQuery(_Model):
 
 
 class Grasp(_Model):
-    """A parallel-jaw grasp in the world frame (grasp frame: DESIGN §2)."""
+    """A parallel-jaw grasp in the world frame (grasp frame: docs/conventions.md)."""
 
     position: Vector3 = Field(description="centre between the finger bases, metres")
     orientation: Quaternion = Field(description="grasp frame → world, [x, y, z, w]")

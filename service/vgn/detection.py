@@ -1,4 +1,4 @@
-"""From the network's voxel-wise output to ranked grasps in the world frame (DESIGN §4)."""
+"""From the network's voxel-wise output to ranked grasps in the world frame (docs/conventions.md)."""
 
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def detect_grasps(
     """Ranked grasps, best first, in the world frame.
 
     Args:
-        grid: (N, N, N) network input (DESIGN §2 semantics), workspace frame.
+        grid: (N, N, N) network input (semantics: docs/conventions.md), workspace frame.
         quality: (N, N, N) raw quality in [0, 1].
         rotation: (4, N, N, N) unit quaternions [x, y, z, w], grasp → workspace frame.
         width: (N, N, N) opening widths in voxels.
