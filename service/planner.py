@@ -39,7 +39,7 @@ def detection_config(query: GraspQuery, threshold: float) -> DetectionConfig:
         crop_min=crop_min,
         crop_max=crop_max,
         approach=query.approach_direction,
-        max_approach_angle=None if angle is None else math.radians(angle),
+        max_approach_angle_rad=None if angle is None else math.radians(angle),
     )
 
 
@@ -53,7 +53,7 @@ def antipodal_config(query: GraspQuery) -> AntipodalConfig:
         crop_min=detection.crop_min,
         crop_max=detection.crop_max,
         approach=detection.approach,
-        max_approach_angle=detection.max_approach_angle,
+        max_approach_angle_rad=detection.max_approach_angle_rad,
     )
 
 

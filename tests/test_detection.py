@@ -126,7 +126,7 @@ def test_crop_box_in_workspace_frame():
     "direction, kept", [((0, 0, -1), True), ((0.3, 0, -1), True), ((1, 0, 0), False), ((0, 0, 1), False)]
 )
 def test_approach_cone_in_world_frame(direction, kept):
-    cone = replace(SHARP, approach=direction, max_approach_angle=np.radians(30))
+    cone = replace(SHARP, approach=direction, max_approach_angle_rad=np.radians(30))
     grasps = detect(free_space_grid(), *outputs({(20, 20, 11): 0.95}), config=cone)
     assert bool(grasps) is kept
 

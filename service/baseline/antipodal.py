@@ -56,7 +56,7 @@ _REACH = math.sqrt(0.045**2 + (PALM_HALF_Y + MAX_OPENING) ** 2 + (PALM_DEPTH + F
 class AntipodalConfig:
     """Sampling and filtering knobs. ``crop_min``/``crop_max`` are corners of a box in the
     workspace frame (metres), applied to grasp positions; ``approach`` is a world-frame
-    direction and ``max_approach_angle`` its cone half-angle in radians."""
+    direction and ``max_approach_angle_rad`` its cone half-angle in radians."""
 
     seeds: int = 500
     approaches: int = 8
@@ -72,7 +72,7 @@ class AntipodalConfig:
     crop_min: tuple[float, float, float] | None = None
     crop_max: tuple[float, float, float] | None = None
     approach: tuple[float, float, float] | None = None
-    max_approach_angle: float | None = None
+    max_approach_angle_rad: float | None = None
 
 
 def plan_antipodal(
@@ -224,11 +224,11 @@ def _filters(quality, positions, rotations, workspace_pose, config: AntipodalCon
             keep &= np.all(local >= np.asarray(config.crop_min), axis=1)
         if config.crop_max is not None:
             keep &= np.all(local <= np.asarray(config.crop_max), axis=1)
-    if config.approach is not None and config.max_approach_angle is not None:
+    if config.approach is not None and config.max_approach_angle_rad is not None:
         direction = np.asarray(config.approach, dtype=np.float64)
         direction /= np.linalg.norm(direction)
         cosine = np.clip(rotations[:, :, 2] @ direction, -1.0, 1.0)
-        keep &= np.arccos(cosine) <= config.max_approach_angle
+        keep &= np.arccos(cosine) <= config.max_approach_angle_rad
     return keep
 
 

@@ -20,7 +20,7 @@ class DetectionConfig:
     """Detection knobs. Defaults are VGN's; crop and cone are optional filters.
 
     ``crop_min``/``crop_max`` are corners of a box in the workspace frame (metres);
-    ``approach`` is a world-frame direction and ``max_approach_angle`` its cone half-angle
+    ``approach`` is a world-frame direction and ``max_approach_angle_rad`` its cone half-angle
     in radians.
     """
 
@@ -34,7 +34,7 @@ class DetectionConfig:
     crop_min: tuple[float, float, float] | None = None
     crop_max: tuple[float, float, float] | None = None
     approach: tuple[float, float, float] | None = None
-    max_approach_angle: float | None = None
+    max_approach_angle_rad: float | None = None
 
 
 def detect_grasps(
@@ -138,7 +138,7 @@ def _inside_cone(candidates, rotation, workspace_pose, config: DetectionConfig) 
     direction = np.asarray(config.approach, dtype=np.float64)
     direction /= np.linalg.norm(direction)
     cosine = np.clip(approach_world @ direction, -1.0, 1.0)
-    return np.arccos(cosine) <= config.max_approach_angle
+    return np.arccos(cosine) <= config.max_approach_angle_rad
 
 
 def _to_world(indices, score, rotation, width, voxel_size, workspace_pose) -> list[Grasp]:
