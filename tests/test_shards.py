@@ -18,7 +18,7 @@ from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
 from service.training.labels import LabelSet
 from service.training.pack import main as pack_main
 from service.training.shards import ShardError, ShardFolder, dequantize, quantize, sha256_of
-from tests.test_training import make_dataset
+from tests.datasets import make_dataset
 
 
 def with_generation(dataset: RawDataset, gripper: str | None = "franka-v2", **settings) -> RawDataset:

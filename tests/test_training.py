@@ -16,14 +16,22 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.dataset import DatasetSetup, RawDataset, SceneViews
-from client.schemas import Intrinsics, SessionCreate
+from client.dataset import DatasetSetup, RawDataset
+from client.schemas import SessionCreate
 from service.core import PlanningService
 from service.planner import GraspPlanner
 from service.training.augment import random_augment, rotate_z, shift_z
 from service.training.checkpoint import checkpoint_path
 from service.training.cli import build_parser, config_from_args, main
-from service.training.dataset import Batch, Sample, collate, load_scenes, prepare_grids, split_scenes
+from service.training.dataset import (
+    Batch,
+    Sample,
+    collate,
+    load_scenes,
+    prepare_grids,
+    split_scenes,
+    subsample_scenes,
+)
 from service.training.grids import cache_key
 from service.training.labels import LabelSet
 from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
@@ -32,45 +40,7 @@ from service.training.quaternions import flipped, multiply
 from service.training.train import TrainConfig
 from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
-from tests.scenes import TABLE_Z, BoxScene, circle_views
-
-N = 40
-VOXEL = 0.3 / N
-#: A small camera keeps the analytic ray casting and the fusion fast.
-SMALL = Intrinsics(width=160, height=120, fx=135.0, fy=135.0, cx=79.5, cy=59.5)
-TOP_DOWN = Rotation.from_euler("x", np.pi)  # grasp z (approach) pointing down
-
-
-def scene_grasps(box: BoxScene, rng: np.random.Generator) -> np.ndarray:
-    """Rows (qx, qy, qz, qw, x, y, z, width, label): top-down positives over the box, negatives
-    in the table and in empty air, and one grasp outside the grid (dropped on load)."""
-    centre = (np.asarray(box.lower) + np.asarray(box.upper)) / 2
-    rows = []
-    for _ in range(3):
-        yaw = Rotation.from_euler("z", rng.uniform(0, np.pi))
-        position = np.r_[centre[:2] + rng.uniform(-0.01, 0.01, 2), box.upper[2] + 0.01]
-        rows.append([*(yaw * TOP_DOWN).as_quat(), *position, 0.06, 1])
-    for _ in range(3):
-        position = np.r_[rng.uniform(0.02, 0.28, 2), rng.choice([TABLE_Z - 0.02, 0.27])]
-        rows.append([*Rotation.random(random_state=rng.integers(1 << 31)).as_quat(), *position, 0.0, 0])
-    rows.append([0, 0, 0, 1, 0.35, 0.1, 0.1, 0.04, 1])  # outside the 0.3 m cube
-    rows = np.asarray(rows, dtype=np.float64)
-    rows[:, 4:7] = np.round(rows[:, 4:7] / VOXEL) * VOXEL  # VGN stores grasps at voxel positions
-    return rows
-
-
-def make_dataset(root: Path, scenes: int, views: int = 2, seed: int = 0) -> RawDataset:
-    """A raw dataset of ``scenes`` boxes of random size and place, each seen from ``views`` cameras."""
-    dataset = RawDataset(root, DatasetSetup(size=0.3, intrinsics=SMALL))
-    rng = np.random.default_rng(seed)
-    for n in range(scenes):
-        corner = rng.uniform(0.08, 0.16, 2)
-        extent = rng.uniform(0.04, 0.08, 3)
-        box = BoxScene(lower=(*corner, TABLE_Z), upper=(*(corner + extent[:2]), TABLE_Z + extent[2]))
-        poses = circle_views(views, tilt_deg=float(rng.uniform(15, 40)))
-        depth = np.stack([box.depth(pose, SMALL) for pose in poses])
-        dataset.add_scene(f"scene{n:03d}", SceneViews(depth, np.stack(poses)), scene_grasps(box, rng))
-    return dataset
+from tests.datasets import SMALL, TOP_DOWN, VOXEL, N, make_dataset
 
 
 @pytest.fixture(scope="module")
@@ -341,6 +311,21 @@ def test_split_is_by_scene_and_fixed_by_seed(dataset: RawDataset, tmp_path: Path
     small_train, small_val = split_scenes(grown[:25], 0.3, seed=2)
     assert {s.key for s in small_val} <= {s.key for s in big_val}
     assert 4 <= len(big_val) <= 20, "about 30 % held out"
+
+
+def test_training_subsets_are_nested_and_keep_the_data_order(tmp_path: Path):
+    """Learning-curve points must train on growing versions of the same scenes."""
+    more = make_dataset(tmp_path / "more", scenes=30)
+    scenes, _ = load_scenes([more.root], N, 2.0, cache_root=tmp_path)
+    keys = [s.key for s in scenes]
+    subsets = {n: [s.key for s in subsample_scenes(scenes, n, seed=3)] for n in (5, 12, 30, 100)}
+    assert [len(subsets[n]) for n in (5, 12, 30, 100)] == [5, 12, 30, 30]
+    assert set(subsets[5]) < set(subsets[12]) < set(subsets[30]) == set(keys)
+    assert subsets[12] == [k for k in keys if k in set(subsets[12])], "original order kept"
+    assert subsets[12] != keys[:12], "a hash-chosen subset, not simply the first scenes"
+    assert subsample_scenes(scenes, None, seed=3) == scenes
+    with pytest.raises(ValueError, match="at least one scene"):
+        subsample_scenes(scenes, 0, seed=3)
 
 
 # Metrics ------------------------------------------------------------------------------------

@@ -78,6 +78,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="share of scenes held out for validation (default %(default)s; 0 = none)",
     )
     data.add_argument(
+        "--train-scenes",
+        dest="max_train_scenes",
+        metavar="N",
+        type=int,
+        default=DEFAULTS["max_train_scenes"],
+        help="train on N of the training scenes, a subset fixed by --seed and nested across sizes "
+        "(validation unchanged): points of a learning curve (default: all)",
+    )
+    data.add_argument(
         "--resolution",
         metavar="N",
         type=int,
@@ -244,6 +253,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         lr=args.lr,
         batch_scenes=args.batch_scenes,
         val_fraction=args.val_fraction,
+        max_train_scenes=args.max_train_scenes,
         seed=args.seed,
         device=args.device,
         cache=args.cache,

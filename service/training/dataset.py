@@ -179,6 +179,22 @@ def split_scenes(scenes: list[Scene], val_fraction: float, seed: int) -> tuple[l
     return train, val
 
 
+def subsample_scenes(scenes: list[Scene], count: int | None, seed: int) -> list[Scene]:
+    """The ``count`` scenes with the lowest hash of (seed, key), in their original order.
+
+    Subsets are nested: the scenes kept at one size are kept at every larger size, and a scene
+    added to the dataset later joins only where its hash ranks, so learning curves over
+    dataset sizes compare growing versions of the same data.
+    """
+    if count is None or count >= len(scenes):
+        return list(scenes)
+    if count < 1:
+        raise ValueError(f"a training subset needs at least one scene, got {count}")
+    ranks = sorted(range(len(scenes)), key=lambda n: _uniform_hash(seed + 1, scenes[n].key))
+    kept = set(ranks[:count])
+    return [scene for n, scene in enumerate(scenes) if n in kept]
+
+
 def _uniform_hash(seed: int, key: str) -> float:
     """A number in [0, 1) fixed by (seed, key), uniform over keys."""
     digest = hashlib.sha256(f"{seed}:{key}".encode()).digest()

@@ -44,6 +44,7 @@ from service.training.dataset import (
     make_loader,
     prepare_grids,
     split_scenes,
+    subsample_scenes,
 )
 from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.loss import gather, per_label_loss
@@ -68,6 +69,8 @@ class TrainConfig:
     lr: float = 3e-4
     batch_scenes: int = 4
     val_fraction: float = 0.1
+    #: train on this many of the training scenes (a nested subset; validation unchanged): learning curves
+    max_train_scenes: int | None = None
     seed: int = 0
     device: str = "auto"
     cache: Path | None = None
@@ -100,6 +103,8 @@ class TrainConfig:
             raise TrainingError(f"--out must end in .safetensors, got {self.out}")
         if self.epochs < 1 or self.batch_scenes < 1 or self.workers < 0 or self.lr <= 0:
             raise TrainingError("epochs and batch size must be >= 1, workers >= 0, lr > 0")
+        if self.max_train_scenes is not None and self.max_train_scenes < 1:
+            raise TrainingError(f"--train-scenes must be >= 1, got {self.max_train_scenes}")
         if self.copies < 1 or (self.patience is not None and self.patience < 1):
             raise TrainingError("--copies and --patience must be >= 1")
         if self.augment not in (None, "height", "shift"):
@@ -148,6 +153,7 @@ def train(
     if not scenes:
         raise TrainingError(f"no labelled scenes inside the grid in {', '.join(map(str, config.data))}")
     train_scenes, val_scenes = split_scenes(scenes, config.val_fraction, config.seed)
+    train_scenes = subsample_scenes(train_scenes, config.max_train_scenes, config.seed)
     for summary in summaries:
         log(
             f"data {summary.path}: {summary.scenes} scenes, {summary.grasps} grasps "
@@ -328,7 +334,7 @@ def _check_checkpoint(config: TrainConfig) -> None:
 def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
     """What a resumed run must share with the checkpoint's: same data, split and grids."""
     split = hashlib.sha256("\n".join(sorted(s.key for s in val_scenes)).encode()).hexdigest()[:16]
-    return {
+    identity = {
         "data": [str(Path(p).resolve()) for p in config.data],
         "seed": config.seed,
         "resolution": config.resolution,
@@ -336,6 +342,9 @@ def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
         "val_fraction": config.val_fraction,
         "val_split": split,
     }
+    if config.max_train_scenes is not None:  # absent otherwise, so earlier checkpoints still resume
+        identity["max_train_scenes"] = config.max_train_scenes
+    return identity
 
 
 def _run_epoch(
@@ -401,6 +410,7 @@ def _training_settings(
         "balance": "per draw: all positives and as many random negatives" if config.balance else None,
         "patience": config.patience,
         "val_fraction": config.val_fraction,
+        "max_train_scenes": config.max_train_scenes,
         "seed": config.seed,
         "augment": {
             "height": "z turns k*90 deg; random height: z shift uniform over all shifts keeping the labels in the grid",
