@@ -11,6 +11,7 @@ COPY pyproject.toml README.md ./
 COPY client client
 COPY service service
 COPY sim_worker sim_worker
+COPY vgn_data vgn_data
 # torch==2.13.0 is pinned in pyproject.toml; the CPU index keeps the CUDA stack out of the image.
 RUN pip install --no-cache-dir --extra-index-url https://download.pytorch.org/whl/cpu ".[service]"
 

@@ -20,14 +20,14 @@ import sys
 from pathlib import Path
 
 from benchmarks.chart import write_chart
-from client.clear_scene import resolve_planner
 from client.embedded import EmbeddedService
-from client.files import write_atomically
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
+from sim_worker.clear_scene import resolve_planner
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
+from vgn_data.files import write_atomically
 
 #: VGN paper, Table 1, VGN at threshold 0.9 (random selection): (success %, cleared %).
 PAPER_TABLE_1 = {

@@ -7,7 +7,7 @@ run, so the ratio is fair and the labels can be compared: fast execution must ag
 the naive one (VGN's protocol: dynamic approach, fixed 0.5 s close, full lift). The point
 sampling uses the scene's fused surface like data generation, but from the simulator's own
 ground truth cloud (no service needed): the benchmark measures physics, not HTTP.
-Target (issue 4): <= 0.25 s per labelled point per core, on average.
+Target: <= 0.25 s per labelled point per core, on average.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from client.files import write_atomically
+from vgn_data.files import write_atomically
 
 PHASES = ("train", "bench", "report")
 

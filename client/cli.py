@@ -275,11 +275,13 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
     return 0
 
 
-SIM_COMMANDS = {"clear-scene": "client.clear_scene", "generate-data": "client.generate_data"}
+#: The simulator commands live in sim_worker (they import pybullet); this is where each one runs.
+SIM_COMMANDS = {"clear-scene": "sim_worker.clear_scene", "generate-data": "sim_worker.generate_data"}
 
 
 def _run_sim_command(args: argparse.Namespace) -> int:
-    """Simulator commands import pybullet, so they load only when they run."""
+    """Simulator commands load only when they run, so a robot-side install without the sim
+    extra keeps every other command."""
     if not args.sim:
         print(f"error: {args.command} runs in simulation only so far: add --sim", file=sys.stderr)
         return 2
@@ -287,7 +289,8 @@ def _run_sim_command(args: argparse.Namespace) -> int:
         module = importlib.import_module(SIM_COMMANDS[args.command])
     except ImportError as error:
         print(
-            f"error: the simulator needs the sim extra ({error}): pip install 'vgn-service[all]'",
+            f"error: {args.command} --sim needs the sim extra ({error}): pip install 'vgn-service[sim]' "
+            "(and the service extra for the embedded service, or point --url at a running one)",
             file=sys.stderr,
         )
         return 2
@@ -311,7 +314,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command in SIM_COMMANDS:
         return _run_sim_command(args)
     if args.command == "clean-data":
-        from client.dataset import clean_and_balance
+        from vgn_data.dataset import clean_and_balance
 
         try:
             kept = clean_and_balance(Path(args.source), Path(args.destination), seed=args.seed)

@@ -2,7 +2,7 @@
 
 Per scene: build a pile or packed scene, render 1-6 random views, post them to a session,
 read the fused grid (to skip scenes where nothing was observed) and the point cloud with
-normals back from the service, and label 120 grasp points by trying 6 yaws each in simulation. The output is VGN's raw layout (client.dataset).
+normals back from the service, and label 120 grasp points by trying 6 yaws each in simulation. The output is VGN's raw layout (vgn_data.dataset).
 
 A share of scenes can be observed the way a real sensor sees them (``noise_fraction``: Dex-Net
 depth noise; ``side_view_fraction``: one view from the side instead of 1-6 from above), so a
@@ -18,7 +18,6 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews
 from client.http import VGNClient
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views
 from sim_worker.grasping import execute_grasp
@@ -28,6 +27,7 @@ from sim_worker.scenes import generate_scene, poisson_object_count
 from sim_worker.service_session import fresh_session
 from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
 from sim_worker.world import WORKSPACE_SIZE, Renderer, World
+from vgn_data.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews
 
 #: Normals must point at least this much upwards: grasps from below the table are pointless.
 MIN_NORMAL_Z = -0.1

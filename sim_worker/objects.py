@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from client.files import write_atomically
+from vgn_data.files import write_atomically
 
 #: VGN's global scale for its block set (``{"blocks": 1.67}`` in its simulation).
 BLOCKS_SCALE = 1.67

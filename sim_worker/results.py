@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from client.files import check_settings, write_atomically
+from vgn_data.files import check_settings, write_atomically
 
 ROUND_COLUMNS = ["round_id", "scene_id", "object_count", "cleared", "attempts", "successes", "seconds"]
 GRASP_COLUMNS = [

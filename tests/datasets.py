@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.dataset import DatasetSetup, RawDataset, SceneViews
 from client.schemas import Intrinsics
 from tests.scenes import TABLE_Z, BoxScene, circle_views
+from vgn_data.dataset import DatasetSetup, RawDataset, SceneViews
 
 N = 40
 VOXEL = 0.3 / N

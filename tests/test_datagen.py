@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews, clean_and_balance
 from sim_worker.datagen import DataGenConfig, grasp_frame, middle_of_widest_run
 from sim_worker.gripper import GRIPPER_VERSION
 from tests.scenes import circle_views
+from vgn_data.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews, clean_and_balance
 
 
 @pytest.mark.parametrize(

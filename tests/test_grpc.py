@@ -357,7 +357,7 @@ def test_clear_scene_episode_over_grpc(service, tmp_path: Path):
 
 
 def test_generate_data_over_grpc(service, tmp_path: Path):
-    from client.dataset import RawDataset
+    from vgn_data.dataset import RawDataset
 
     out = tmp_path / "data"
     command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", service.grpc_url,

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import torch
 
-from client.dataset import RawDataset
 from service.training.augment import balanced_subset, height_range, random_placement
 from service.training.cli import main as train_main
 from service.training.dataset import SceneDataset, load_scenes
@@ -19,6 +18,7 @@ from service.training.labels import LabelSet
 from service.training.pack import main as pack_main
 from service.training.shards import ShardError, ShardFolder, dequantize, quantize, sha256_of
 from tests.datasets import make_dataset
+from vgn_data.dataset import RawDataset
 
 
 def with_generation(dataset: RawDataset, gripper: str | None = "franka-v2", **settings) -> RawDataset:

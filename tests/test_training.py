@@ -1,7 +1,7 @@
 """Training pipeline: loss, augmentation, grids, cache, and a short train → resume → serve run.
 
 The datasets are tiny synthetic raw datasets: analytic box scenes seen by small cameras,
-with a handful of hand-placed labels, written through ``client.dataset.RawDataset``.
+with a handful of hand-placed labels, written through ``vgn_data.dataset.RawDataset``.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.dataset import DatasetSetup, RawDataset
 from client.schemas import SessionCreate
 from service.core import PlanningService
 from service.planner import GraspPlanner
@@ -41,6 +40,7 @@ from service.training.train import TrainConfig
 from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
 from tests.datasets import SMALL, TOP_DOWN, VOXEL, N, make_dataset
+from vgn_data.dataset import DatasetSetup, RawDataset
 
 
 @pytest.fixture(scope="module")

@@ -11,9 +11,9 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from client.files import atomic_writer, write_atomically
 from service.vgn.checkpoint import weights_id
 from service.vgn.network import PARAMETER_COUNT
+from vgn_data.files import atomic_writer, write_atomically
 
 CARD_FORMAT = 1
 

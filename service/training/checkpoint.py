@@ -13,7 +13,7 @@ from typing import Any
 
 import torch
 
-from client.files import atomic_writer
+from vgn_data.files import atomic_writer
 
 #: Bump when the layout below changes incompatibly.
 CHECKPOINT_FORMAT = 1

@@ -18,11 +18,11 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from client.dataset import RawDataset
 from service.training.augment import balanced_subset, random_augment, random_placement
 from service.training.grids import GridSource, cache_dir, cache_key, ensure_cached
 from service.training.labels import LabelSet
 from service.training.shards import ShardFolder, dequantize
+from vgn_data.dataset import RawDataset
 
 
 @dataclass(frozen=True, eq=False)

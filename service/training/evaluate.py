@@ -39,9 +39,9 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
     threshold and return the summary (success rate and cleared with 95 % intervals, outcome
     breakdown) with the settings. ``results`` keeps the rounds, so a rerun resumes."""
     try:
-        from client.clear_scene import resolve_planner
         from client.embedded import EmbeddedService
         from client.http import VGNClient
+        from sim_worker.clear_scene import resolve_planner
         from sim_worker.clutter import ClutterConfig, ClutterRemoval
         from sim_worker.results import ResultsFolder
     except ImportError as error:

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from client.dataset import DatasetSetup, RawDataset, SceneViews
-from client.files import atomic_writer
 from service.tsdf import TSDFVolume
+from vgn_data.dataset import DatasetSetup, RawDataset, SceneViews
+from vgn_data.files import atomic_writer
 
 #: VGN's grid resolution (docs/conventions.md); the network needs a multiple of 8.
 RESOLUTION = 40

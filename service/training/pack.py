@@ -16,9 +16,9 @@ import json
 import sys
 from pathlib import Path
 
-from client.dataset import RawDataset
 from client.log_level import add_log_level_option, configure_logging
 from service.training.shards import DEFAULT_SCENES_PER_SHARD, ShardError, ShardFolder, manifest_summary
+from vgn_data.dataset import RawDataset
 
 
 def build_parser() -> argparse.ArgumentParser:

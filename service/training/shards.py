@@ -1,6 +1,6 @@
 """Training data as it is kept in the repository: packed, append-only shards with a manifest.
 
-Raw datasets (depth images, see ``client.dataset``) are far too large to keep, and they do
+Raw datasets (depth images, see ``vgn_data.dataset``) are far too large to keep, and they do
 not survive from one machine to the next. What training needs of a scene is its fused network
 input and its labels, so a shard holds, for a few hundred to a thousand scenes:
 
@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from client.dataset import RawDataset
-from client.files import write_atomically
 from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
+from vgn_data.dataset import RawDataset
+from vgn_data.files import write_atomically
 
 MANIFEST = "manifest.json"
 SHARD_FORMAT = 1

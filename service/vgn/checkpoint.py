@@ -12,8 +12,8 @@ from typing import Any
 import torch
 from safetensors.torch import load_file, save
 
-from client.files import write_atomically
 from service.vgn.network import VGN
+from vgn_data.files import write_atomically
 
 STATE_DICT_SUFFIXES = {".pt", ".pth"}
 

@@ -1,6 +1,7 @@
 """``vgn-client clear-scene --sim``: the simulator against a (possibly embedded) service.
 
-Imported only when the command runs, so the client package itself never needs pybullet.
+``client.cli`` imports this module only when the command runs, so the robot-side client
+never needs pybullet.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """``vgn-client generate-data --sim``: K simulator processes labelling scenes through one service.
 
-Imported only when the command runs, so the client package itself never needs pybullet.
+``client.cli`` imports this module only when the command runs, so the robot-side client
+never needs pybullet.
 """
 
 from __future__ import annotations
@@ -14,11 +15,11 @@ import sys
 import time
 from pathlib import Path
 
-from client.dataset import RawDataset
 from client.embedded import EmbeddedService
-from client.files import check_settings
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
 from sim_worker.gripper import GRIPPER_VERSION
+from vgn_data.dataset import RawDataset
+from vgn_data.files import check_settings
 
 
 def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:

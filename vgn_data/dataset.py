@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from client.files import atomic_writer, write_atomically
 from client.geometry import invert, matrix_from_pose, pose_from_matrix
 from client.schemas import Intrinsics
+from vgn_data.files import atomic_writer, write_atomically
 
 GRASP_COLUMNS = ["scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "label"]
 
