@@ -85,6 +85,11 @@ class EmbeddedService:
             raise
         return self
 
+    @property
+    def pid(self) -> int | None:
+        """The service process's id while it runs (to watch its memory or signal it)."""
+        return self._process.pid if self._process is not None else None
+
     def _wait_until_up(self) -> None:
         assert self._process is not None
         deadline = time.monotonic() + self._startup_timeout
