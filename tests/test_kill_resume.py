@@ -272,12 +272,15 @@ def boxes(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return make_dataset(tmp_path_factory.mktemp("raw") / "boxes", scenes=3).root
 
 
-def train(data: Path, out: Path, epochs: int, *extra: str, crash_at: str | None = None):
+def train_args(data: Path, out: Path, epochs: int, *extra: str) -> list[str]:
     """A tiny run; the grid cache beside the data is shared by every run (each fuses nothing twice)."""
-    args = [command("vgn-train"), "--data", str(data), "--out", str(out), "--cache", str(data.parent / "cache"),
-            "--batch-scenes", "1", "--val-fraction", "0.34", "--no-progress", "--threads", "1",
-            "--lr", "1e-3", "--threshold", "0.9", "--epochs", str(epochs), *extra]  # fmt: skip
-    return run(args, crash_at)
+    return ["--data", str(data), "--out", str(out), "--cache", str(data.parent / "cache"), "--batch-scenes", "1",
+            "--val-fraction", "0.34", "--no-progress", "--threads", "1", "--lr", "1e-3", "--threshold", "0.9",
+            "--epochs", str(epochs), *extra]  # fmt: skip
+
+
+def train(data: Path, out: Path, epochs: int, *extra: str, crash_at: str | None = None):
+    return run([command("vgn-train"), *train_args(data, out, epochs, *extra)], crash_at)
 
 
 def assert_same_training(made: Path, reference: Path) -> None:
@@ -299,9 +302,16 @@ def assert_same_training(made: Path, reference: Path) -> None:
 
 @pytest.fixture(scope="module")
 def reference_training(boxes: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The uninterrupted run, in this process (what the console script calls; it saves a
+    process start): single-threaded torch computes the same numbers in any process."""
+    from service.training.cli import main
+
     out = tmp_path_factory.mktemp("reference") / "vgn.safetensors"
-    done = train(boxes, out, 2)
-    assert done.returncode == 0, done.stderr
+    threads = torch.get_num_threads()
+    try:
+        assert main(train_args(boxes, out, 2)) == 0
+    finally:
+        torch.set_num_threads(threads)
     return out
 
 
