@@ -298,6 +298,10 @@ def test_each_typed_error_matches_its_server_answer(vgn: VGNClient, server: Embe
         VGNClient(keyed.url).sessions()
     with pytest.raises(NotFound):  # 404
         vgn.session("no-such-session")
+    cloud_as_html = httpx.get(f"{server.url}/sessions/{session}/cloud", headers={"Accept": "text/html"})
+    with pytest.raises(VGNError) as unmapped:  # 406 has no class of its own: the base one
+        raise_for_error(cloud_as_html)
+    assert type(unmapped.value) is VGNError and unmapped.value.status == 406
     for error in (bad, unsupported, invalid, conflict, too_large, no_model):
         assert isinstance(error.value, VGNError) and error.value.detail, "each carries the service's reason"
     assert vgn.session(session).frame_count == 0, "no refused frame was fused"
