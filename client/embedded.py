@@ -17,6 +17,8 @@ from pathlib import Path
 
 import httpx
 
+from client.lifetime import preexec_for_child
+
 
 def free_port(host: str = "127.0.0.1") -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
@@ -70,15 +72,23 @@ class EmbeddedService:
             "--log-level",
             "warning",
         ]
+        # The service ends with this process, even one killed with SIGKILL (preexec_for_child).
         # A file, not a pipe: a pipe nobody reads would block a chatty child.
         self._log = open(self._log_path, "a+b") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
-        self._process = subprocess.Popen(command, env=self._env, stdout=self._log, stderr=self._log)
+        self._process = subprocess.Popen(
+            command, env=self._env, stdout=self._log, stderr=self._log, preexec_fn=preexec_for_child()
+        )
         try:
             self._wait_until_up()
         except BaseException:
             self.stop()
             raise
         return self
+
+    @property
+    def pid(self) -> int | None:
+        """The service process's id while it runs (to watch its memory or signal it)."""
+        return self._process.pid if self._process is not None else None
 
     def _wait_until_up(self) -> None:
         assert self._process is not None

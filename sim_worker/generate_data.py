@@ -25,6 +25,9 @@ from vgn_data.files import check_settings
 def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:
     """One simulator process: its own PyBullet world and client, its share of the scenes."""
     from client.connect import connect
+    from client.lifetime import end_with_parent
+
+    end_with_parent()  # a killed command must not leave workers labelling on
     from sim_worker.datagen import generate
 
     with connect(url, api_key=api_key, timeout=120.0) as vgn:

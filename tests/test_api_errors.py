@@ -571,18 +571,26 @@ def test_bad_grasp_query_is_422_naming_the_field(
 
 
 def test_valid_grasp_query_is_accepted(shared_http: TestClient, fused: str) -> None:
-    """The refusals above are about the values, not the parameters themselves."""
+    """The refusals above are about the values, not the parameters themselves: a query with
+    every option answers with grasps that meet each of them."""
+    unfiltered = shared_http.get(f"/sessions/{fused}/grasps", params={"threshold": 0.5}).json()["grasps"]
+    assert unfiltered, "the fused box has grasps"
+    approach = unfiltered[0]["approach"]
     params = {
         "threshold": 0.5,
         "max_grasps": 3,
         "crop_min": "0,0,0",
         "crop_max": "0.3,0.3,0.3",
-        "approach": "0,0,-1",
+        "approach": ",".join(f"{x:.6f}" for x in approach),
         "max_approach_angle": 60,
     }
     response = shared_http.get(f"/sessions/{fused}/grasps", params=params)
     assert response.status_code == 200, response.text
-    assert len(response.json()["grasps"]) <= 3
+    grasps = response.json()["grasps"]
+    assert 1 <= len(grasps) <= 3, "at least the grasp the cone is aimed along passes every filter"
+    for grasp in grasps:
+        assert grasp["quality"] >= 0.5 and all(0 <= x <= 0.3 for x in grasp["position"])
+        assert np.dot(grasp["approach"], approach) >= np.cos(np.radians(60)) - 1e-6
 
 
 @pytest.mark.parametrize("accept", ["text/html", "application/json"])

@@ -142,13 +142,14 @@ def test_labels_of_a_generated_scene_replay(server, tmp_path: Path):
 
 
 def test_a_torn_write_is_healed_before_the_next_append(tmp_path: Path):
-    """A writer killed mid-line leaves a partial row: the next append cuts it along with the
-    rest of that scene's rows, so the scene counts as not done and is generated again."""
+    """A writer killed mid-line leaves a partial row: the scene counts as not done at once (a
+    resumed run generates it again), and the next append cuts the rest of its rows."""
     make_dataset(tmp_path, [("a", [0.1, 0.1, 0.1], 1), ("b", [0.1, 0.2, 0.1], 0)])
     with (tmp_path / "grasps.csv").open("a") as stream:
         stream.write("c,0,0,0,1,0.1,0.1,0.1,0.05,1\nc,0.1,0.2")  # scene c: one row, then torn
     dataset = RawDataset(tmp_path)
-    assert "c" in dataset.done_scene_ids()  # readers alone cannot tell that c is incomplete
+    assert dataset.done_scene_ids() == {"a", "b"}, "c is incomplete: not done, none of its rows read"
+    assert dataset.grasps()[0] == ["a", "b"]
     poses = np.stack(circle_views(1))
     dataset.add_scene(
         "d",

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import os
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +11,7 @@ import pytest
 pytest.importorskip("pybullet")
 
 from sim_worker.objects import (  # noqa: E402
+    BLOCKS,
     BLOCKS_SCALE,
     MAX_EXTENT,
     MAX_GRASP_EXTENT,
@@ -21,11 +21,11 @@ from sim_worker.objects import (  # noqa: E402
     object_set,
     pybullet_data_set,
     urdf_folder_set,
+    write_blocks,
 )
 from sim_worker.scenes import generate_scene, poisson_object_count  # noqa: E402
 from sim_worker.world import TABLE_Z, WORKSPACE_SIZE, World  # noqa: E402
 
-SHARED_BLOCKS = Path(__file__).resolve().parents[2] / "shared" / "objects" / "blocks"
 COUNT = 5
 
 
@@ -145,10 +145,13 @@ def test_urdf_folder_set_and_object_set_names(blocks: ObjectSet, tmp_path: Path)
         object_set("blocks", "tower")
 
 
-@pytest.mark.skipif(not SHARED_BLOCKS.is_dir(), reason="../shared/objects is not available")
-def test_shared_vgn_blocks_folder(world: World) -> None:
-    objects = object_set(str(SHARED_BLOCKS), "blocks")
-    assert len(objects) == 5 and objects.scale_factor == BLOCKS_SCALE
+def test_a_folder_in_vgns_blocks_layout(world: World, tmp_path: Path) -> None:
+    """A folder named ``blocks`` holding one URDF per block (meshes beside them), as VGN's
+    is laid out: it gets VGN's block scale and builds a full blocks scene."""
+    folder = tmp_path / "blocks"
+    write_blocks(folder)
+    objects = object_set(str(folder), "blocks")
+    assert len(objects) == len(BLOCKS) and objects.scale_factor == BLOCKS_SCALE
     bodies = generate_scene(world, "blocks", objects, COUNT, np.random.default_rng(0))
     assert len(bodies) >= COUNT - 1
 
@@ -223,5 +226,4 @@ def test_poisson_object_count() -> None:
 
 
 def test_env_cache_dir_is_used(cache_dir: Path) -> None:
-    assert os.environ["VGN_CACHE_DIR"] == str(cache_dir)
     assert blocks_set().urdfs[0].parent == cache_dir / "blocks"

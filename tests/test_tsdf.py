@@ -116,11 +116,15 @@ def test_frame_size_can_change_between_frames():
     from client.schemas import Intrinsics
 
     small = Intrinsics(width=320, height=240, fx=270.0, fy=270.0, cx=159.75, cy=119.75)
-    volume = TSDFVolume(0.3, 40)
+    volume = SceneVolume(0.3, 40, np.eye(4), cloud_resolution=120)
     camera_pose = circle_views(1)[0]
     volume.integrate(SCENE.depth(camera_pose, small), small, camera_pose, 2.0)
+    first = volume.grid().copy()
     volume.integrate(SCENE.depth(camera_pose), INTRINSICS, camera_pose, 2.0)
-    assert volume.grid().any()
+    assert not np.array_equal(volume.grid(), first), "the second, larger frame was fused too"
+    cloud = volume.cloud()
+    assert len(cloud) > 500, "both frames put the surface where it is"
+    assert np.percentile(SCENE.distance_to_surface(cloud[:, :3].astype(np.float64)), 95) < 0.003
 
 
 def test_cloud_volume_is_fused_only_on_demand_and_bounded():

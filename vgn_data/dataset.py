@@ -13,6 +13,7 @@ done once it has rows in grasps.csv, so a resumed run skips it and repeats nothi
 from __future__ import annotations
 
 import csv
+import io
 import json
 import os
 from dataclasses import dataclass, field
@@ -22,7 +23,7 @@ import numpy as np
 
 from client.geometry import invert, matrix_from_pose, pose_from_matrix
 from client.schemas import Intrinsics
-from vgn_data.files import atomic_writer, write_atomically
+from vgn_data.files import atomic_writer, crash_now, crash_point, write_atomically
 
 GRASP_COLUMNS = ["scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "label"]
 
@@ -79,13 +80,12 @@ class SceneViews:
         return cls(np.asarray(depth, dtype=np.float32), np.asarray(poses).reshape(-1, 4, 4))
 
 
-def _heal_torn_tail(stream) -> None:
-    """Cut an unfinished last line and the rows of the scene it belonged to (the header,
-    line 0, always stays)."""
-    stream.seek(0)
-    text = stream.read()
+def _whole_scenes(text: str) -> str:
+    """``text`` of grasps.csv without an unfinished last line (a writer killed mid-write) and
+    without the rows of the scene it belonged to: a scene counts only with all its rows. The
+    header, line 0, always stays."""
     if not text or text.endswith("\n"):
-        return
+        return text
     cut = text.rfind("\n") + 1
     lines, fragment = text[:cut].splitlines(keepends=True), text[cut:]
     fragment_id = fragment.split(",")[0]
@@ -96,9 +96,18 @@ def _heal_torn_tail(stream) -> None:
     )
     while len(lines) > 1 and lines[-1].split(",")[0] == torn_id:
         lines.pop()
+    return "".join(lines)
+
+
+def _heal_torn_tail(stream) -> None:
+    """Cut an unfinished last line and the rows of the scene it belonged to from the file."""
     stream.seek(0)
-    stream.truncate()
-    stream.write("".join(lines))
+    text = stream.read()
+    whole = _whole_scenes(text)
+    if whole != text:
+        stream.seek(0)
+        stream.truncate()
+        stream.write(whole)
 
 
 def _csv_lines(scene_ids, rows: np.ndarray) -> str:
@@ -157,10 +166,15 @@ class RawDataset:
         mid-write) is cut first, with the rows of its scene, which then counts as not done."""
         import fcntl
 
-        with (path or self.grasps_path).open("a+") as stream:
+        path = path or self.grasps_path
+        with path.open("a+") as stream:
             fcntl.flock(stream, fcntl.LOCK_EX)
             try:
                 _heal_torn_tail(stream)
+                if crash_point(path):  # crash tests: die with half the lines written
+                    stream.write(text[: len(text) // 2])
+                    stream.flush()
+                    crash_now()
                 stream.write(text)
                 stream.flush()
                 os.fsync(stream.fileno())
@@ -168,10 +182,12 @@ class RawDataset:
                 fcntl.flock(stream, fcntl.LOCK_UN)
 
     def _rows(self) -> list[list[str]]:
-        """Rows of grasps.csv as lists of fields; a torn last line (a writer killed
-        mid-write, fewer fields) is skipped. Plain lists keep 2 M rows affordable."""
+        """Rows of grasps.csv as lists of fields. A torn last line (a writer killed mid-write)
+        is skipped with the rest of its scene's rows, as the next append will cut them: else a
+        resumed run would take that scene as done and keep it incomplete. Plain lists keep 2 M
+        rows affordable."""
         with self.grasps_path.open(newline="") as stream:
-            reader = csv.reader(stream)
+            reader = csv.reader(io.StringIO(_whole_scenes(stream.read())))
             next(reader, None)
             return [row for row in reader if len(row) == len(GRASP_COLUMNS) and row[-1]]
 
