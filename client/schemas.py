@@ -176,8 +176,9 @@ class FrameResult(_Model):
     integration_ms: float = Field(description="time to integrate this frame")
 
 
-#: A finite decimal number as the grasp query's vectors take it (bounded, so it cannot overflow).
-_NUMBER = r"[-+]?(?:[0-9]{1,20}(?:\.[0-9]{0,20})?|\.[0-9]{1,20})(?:[eE][-+]?[0-9]{1,2})?"
+#: A decimal number as the grasp query's vectors take it; one that overflows a double is refused
+#: by the rule that the numbers be finite.
+_NUMBER = r"[-+]?(?:[0-9]{1,20}(?:\.[0-9]{0,20})?|\.[0-9]{1,20})(?:[eE][-+]?[0-9]{1,3})?"
 #: ``x,y,z``, or empty: an empty query value means "not given", as a blank form field does.
 VECTOR3_PATTERN = rf"^(?:{_NUMBER},{_NUMBER},{_NUMBER})?$"
 
