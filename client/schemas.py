@@ -179,8 +179,9 @@ class FrameResult(_Model):
 #: A decimal number as the grasp query's vectors take it; one that overflows a double is refused
 #: by the rule that the numbers be finite.
 _NUMBER = r"[-+]?(?:[0-9]{1,20}(?:\.[0-9]{0,20})?|\.[0-9]{1,20})(?:[eE][-+]?[0-9]{1,3})?"
-#: ``x,y,z``, or empty: an empty query value means "not given", as a blank form field does.
-VECTOR3_PATTERN = rf"^(?:{_NUMBER},{_NUMBER},{_NUMBER})?$"
+#: ``x,y,z`` (spaces around the numbers allowed), or empty: an empty query value means "not
+#: given", as a blank form field does.
+VECTOR3_PATTERN = rf"^(?: *{_NUMBER} *, *{_NUMBER} *, *{_NUMBER} *)?$"
 
 
 def _vector3_field(description: str) -> Any:

@@ -41,7 +41,7 @@ CONTRACT_CODES = {
     grpc.StatusCode.RESOURCE_EXHAUSTED,
     grpc.StatusCode.UNAVAILABLE,
 }
-SHORT_EXAMPLES = 25
+SHORT_EXAMPLES = 50
 SLOW_EXAMPLES = int(os.environ.get("VGN_FUZZ_EXAMPLES", "300"))
 FUZZ_SETTINGS = {
     "derandomize": True,

@@ -3,7 +3,7 @@ and sends them to a live uvicorn server on loopback, checking every answer again
 document (status codes, content types, headers, response schemas, Allow headers) and that
 nothing is a server error. Seeded and derandomized, so the cases are the same from run to run.
 
-The short run is ~150 cases; ``VGN_FUZZ_EXAMPLES=500 python3 -m pytest -m slow
+The short run is ~130 requests; ``VGN_FUZZ_EXAMPLES=500 python3 -m pytest -m slow
 tests/test_http_contract.py`` runs a larger one (see README, Testing).
 """
 

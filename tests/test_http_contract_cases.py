@@ -68,7 +68,7 @@ def test_empty_vector_options_mean_not_given(document: dict, app_http: TestClien
     for name in ("crop_min", "crop_max", "approach"):
         # Applies to the string branch of the parameter's anyOf (JSON Schema patterns skip null).
         pattern = parameter(document, "get", f"/sessions/{{session_id}}/{route}", name)["schema"]["pattern"]
-        assert re.search(pattern, "") and re.search(pattern, "0.1,-2,3e-2")
+        assert re.search(pattern, "") and re.search(pattern, "0.1,-2,3e-2") and re.search(pattern, "1, 2, 3")
         assert not re.search(pattern, "0.1,2") and not re.search(pattern, "nan,0,0")
         refused = app_http.get(url, params={name: "0.1,2"})
         assert refused.status_code == 422 and name in refused.json()["message"]
