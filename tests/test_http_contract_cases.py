@@ -106,3 +106,21 @@ def test_every_path_names_all_its_methods_in_allow(document: dict, app_http: Tes
         assert response.status_code == 405, path
         allowed = {method.strip() for method in response.headers["allow"].split(",")}
         assert documented <= allowed <= documented | {"HEAD"}, (path, allowed)
+
+
+def test_every_reference_in_the_document_resolves(document: dict) -> None:
+    """The meta part and header borrow FrameMeta's nested models from the components by name."""
+
+    def refs(node) -> Iterator[str]:
+        if isinstance(node, dict):
+            if isinstance(node.get("$ref"), str):
+                yield node["$ref"]
+            for value in node.values():
+                yield from refs(value)
+        elif isinstance(node, list):
+            for value in node:
+                yield from refs(value)
+
+    schemas = document["components"]["schemas"]
+    found = set(refs(document["paths"])) | set(refs(schemas))
+    assert found and all(ref.removeprefix("#/components/schemas/") in schemas for ref in found), found
