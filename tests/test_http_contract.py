@@ -41,7 +41,9 @@ SLOW_EXAMPLES = int(os.environ.get("VGN_FUZZ_EXAMPLES", "200"))
 FRAMES_OPERATION = "POST /sessions/{session_id}/frames"
 
 
-def valid_but_beyond_schema(ctx, response, case) -> None:
+def valid_but_beyond_schema(
+    ctx: schemathesis.CheckContext, response: schemathesis.Response, case: schemathesis.Case
+) -> None:
     """Schema-valid requests are accepted, except where a documented rule that JSON Schema
     cannot state refuses them with a clear message: a custom rule of the wire schemas (unit
     quaternions, crop_min below crop_max, approach with max_approach_angle, a principal point
@@ -91,7 +93,7 @@ def contract_server(random_checkpoint: Path) -> Iterator[EmbeddedService]:
         yield service
 
 
-def loaded_schema(server: EmbeddedService, *, coverage: bool):
+def loaded_schema(server: EmbeddedService, *, coverage: bool) -> schemathesis.BaseSchema:
     """The live document; the coverage phase (every boundary and missing-part case the schema
     defines, ~1,000 requests) only in the long run."""
     config = schemathesis.Config.from_dict(
@@ -101,12 +103,12 @@ def loaded_schema(server: EmbeddedService, *, coverage: bool):
 
 
 @pytest.fixture(scope="module")
-def live_schema(contract_server: EmbeddedService):
+def live_schema(contract_server: EmbeddedService) -> schemathesis.BaseSchema:
     return loaded_schema(contract_server, coverage=False)
 
 
 @pytest.fixture(scope="module")
-def live_schema_full(contract_server: EmbeddedService):
+def live_schema_full(contract_server: EmbeddedService) -> schemathesis.BaseSchema:
     return loaded_schema(contract_server, coverage=True)
 
 
@@ -122,7 +124,7 @@ FUZZ_SETTINGS = {
 
 @schema.parametrize()
 @settings(max_examples=SHORT_EXAMPLES, **FUZZ_SETTINGS)
-def test_http_contract(case) -> None:
+def test_http_contract(case: schemathesis.Case) -> None:
     case.call_and_validate(checks=CHECKS)
 
 
@@ -138,17 +140,17 @@ def run_workflows(live: schemathesis.BaseSchema, examples: int, steps: int) -> N
     Workflows.run(settings=settings(max_examples=examples, stateful_step_count=steps, **FUZZ_SETTINGS))
 
 
-def test_http_workflows(live_schema) -> None:
+def test_http_workflows(live_schema: schemathesis.BaseSchema) -> None:
     run_workflows(live_schema, examples=SHORT_WORKFLOWS, steps=4)
 
 
 @pytest.mark.slow
 @full_schema.parametrize()
 @settings(max_examples=SLOW_EXAMPLES, **FUZZ_SETTINGS)
-def test_http_contract_long(case) -> None:
+def test_http_contract_long(case: schemathesis.Case) -> None:
     case.call_and_validate(checks=CHECKS)
 
 
 @pytest.mark.slow
-def test_http_workflows_long(live_schema_full) -> None:
+def test_http_workflows_long(live_schema_full: schemathesis.BaseSchema) -> None:
     run_workflows(live_schema_full, examples=SLOW_EXAMPLES, steps=10)
