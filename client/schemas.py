@@ -87,14 +87,14 @@ class Pose(_Model):
 
 
 class Intrinsics(_Model):
-    """Pinhole intrinsics of a depth camera, in pixels."""
+    """Pinhole intrinsics of a depth camera, in pixels; width × height at most 16,000,000."""
 
     width: int = Field(gt=0, le=MAX_IMAGE_SIDE)
     height: int = Field(gt=0, le=MAX_IMAGE_SIDE)
     fx: FiniteFloat = Field(gt=0)
     fy: FiniteFloat = Field(gt=0)
-    cx: FiniteFloat
-    cy: FiniteFloat
+    cx: FiniteFloat = Field(description="principal point x, inside the image: 0 < cx < width")
+    cy: FiniteFloat = Field(description="principal point y, inside the image: 0 < cy < height")
 
     @model_validator(mode="after")
     def _principal_point_inside(self) -> Intrinsics:
