@@ -22,7 +22,8 @@ def check_unit_quaternion(quaternion: np.ndarray) -> None:
         raise ValueError(f"quaternion must have 4 elements [x, y, z, w], got shape {q.shape}")
     if not np.all(np.isfinite(q)):
         raise ValueError("quaternion contains NaN or inf")
-    norm = float(np.linalg.norm(q))
+    with np.errstate(over="ignore"):  # a norm beyond a double is inf, and refused as such
+        norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > UNIT_QUATERNION_TOLERANCE:
         raise ValueError(f"quaternion must have unit length, its norm is {norm:.6g}")
 

@@ -9,12 +9,18 @@ quaternions ``[x, y, z, w]``, camera poses camera→world in the OpenCV optical 
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
 
-from client.geometry import check_rigid_matrix, check_unit_quaternion, pose_from_matrix
+from client.geometry import (
+    UNIT_QUATERNION_TOLERANCE,
+    check_rigid_matrix,
+    check_unit_quaternion,
+    pose_from_matrix,
+)
 
 Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 Quaternion = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
@@ -43,7 +49,9 @@ class Pose(_Model):
 
     position: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
     orientation: Quaternion = Field(
-        default_factory=lambda: [0.0, 0.0, 0.0, 1.0], description="unit quaternion [x, y, z, w]"
+        default_factory=lambda: [0.0, 0.0, 0.0, 1.0],
+        description="unit quaternion [x, y, z, w]: 4 finite numbers whose norm must be 1 "
+        f"(within {UNIT_QUATERNION_TOLERANCE:g}); a zero or non-unit quaternion is refused with 422",
     )
 
     @model_validator(mode="before")
@@ -79,14 +87,14 @@ class Pose(_Model):
 
 
 class Intrinsics(_Model):
-    """Pinhole intrinsics of a depth camera, in pixels."""
+    """Pinhole intrinsics of a depth camera, in pixels; width × height at most 16,000,000."""
 
     width: int = Field(gt=0, le=MAX_IMAGE_SIDE)
     height: int = Field(gt=0, le=MAX_IMAGE_SIDE)
     fx: FiniteFloat = Field(gt=0)
     fy: FiniteFloat = Field(gt=0)
-    cx: FiniteFloat
-    cy: FiniteFloat
+    cx: FiniteFloat = Field(description="principal point x, inside the image: 0 < cx < width")
+    cy: FiniteFloat = Field(description="principal point y, inside the image: 0 < cy < height")
 
     @model_validator(mode="after")
     def _principal_point_inside(self) -> Intrinsics:
@@ -107,7 +115,11 @@ class Workspace(_Model):
 
     size: FiniteFloat = Field(default=0.30, gt=0.01, le=5.0, description="side length in metres")
     resolution: int = Field(
-        default=40, ge=16, le=160, description="voxels per side; a multiple of 8 (network strides)"
+        default=40,
+        ge=16,
+        le=160,
+        description="voxels per side; a multiple of 8 (network strides)",
+        json_schema_extra={"multipleOf": 8},
     )
     pose: Pose = Field(default_factory=Pose, description="workspace corner → world")
 
@@ -164,6 +176,31 @@ class FrameResult(_Model):
     integration_ms: float = Field(description="time to integrate this frame")
 
 
+#: A decimal number as the grasp query's vectors take it; one that overflows a double is refused
+#: by the rule that the numbers be finite.
+_NUMBER = r"[-+]?(?:[0-9]{1,20}(?:\.[0-9]{0,20})?|\.[0-9]{1,20})(?:[eE][-+]?[0-9]{1,3})?"
+#: ``x,y,z`` (spaces around the numbers allowed), or empty: an empty query value means "not
+#: given", as a blank form field does.
+VECTOR3_PATTERN = rf"^(?: *{_NUMBER} *, *{_NUMBER} *, *{_NUMBER} *)?$"
+
+
+def _vector3_field(description: str) -> Any:
+    return Field(
+        default=None,
+        description=f"'x,y,z': {description}; empty is the same as not given",
+        json_schema_extra={"pattern": VECTOR3_PATTERN},
+    )
+
+
+def _checked_vector3_text(name: str, text: str | None) -> str | None:
+    """``None`` for an absent or empty value; else the text, refused unless it is three numbers."""
+    if text is None or text == "":
+        return None
+    if not re.fullmatch(VECTOR3_PATTERN, text):
+        raise ValueError(f"{name} must be three comma-separated numbers 'x,y,z', got {text!r}")
+    return text
+
+
 def _parse_vector3(name: str, text: str | None) -> tuple[float, float, float] | None:
     if text is None:
         return None
@@ -194,18 +231,24 @@ class GraspQuery(_Model):
     )
     max_grasps: int | None = Field(default=None, ge=1, le=10000, description="return at most this many")
     nms_size: int = Field(default=4, ge=1, le=15, description="non-maximum suppression window (voxels)")
-    crop_min: str | None = Field(
-        default=None, description="'x,y,z': lower corner of a crop box, workspace frame, metres"
+    crop_min: str | None = _vector3_field(
+        "lower corner of a crop box, workspace frame, metres; below crop_max on every axis"
     )
-    crop_max: str | None = Field(
-        default=None, description="'x,y,z': upper corner of a crop box, workspace frame, metres"
-    )
-    approach: str | None = Field(
-        default=None, description="'x,y,z': preferred approach direction, world frame"
+    crop_max: str | None = _vector3_field("upper corner of a crop box, workspace frame, metres")
+    approach: str | None = _vector3_field(
+        "preferred approach direction, world frame; non-zero, and only with max_approach_angle"
     )
     max_approach_angle: float | None = Field(
-        default=None, gt=0.0, le=180.0, description="degrees between a grasp's approach and `approach`"
+        default=None,
+        gt=0.0,
+        le=180.0,
+        description="degrees between a grasp's approach and `approach`; only with approach",
     )
+
+    @field_validator("crop_min", "crop_max", "approach", mode="before")
+    @classmethod
+    def _vector3_text(cls, value: Any, info: Any) -> Any:
+        return _checked_vector3_text(info.field_name, value) if isinstance(value, str) else value
 
     @model_validator(mode="after")
     def _consistent(self) -> GraspQuery:

@@ -9,6 +9,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from service.errors import (
     CapacityExceeded,
@@ -48,6 +49,22 @@ def validation_response(errors: list, prefix: tuple[str, ...] = ()) -> JSONRespo
     return JSONResponse(status_code=422, content={"detail": cleaned, "message": summary})
 
 
+#: Methods a 405 may name in its Allow header.
+HTTP_METHODS = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+
+
+def allowed_methods(request: Request) -> list[str]:
+    """Every method some route serves at this path, found by asking the app's routes whether
+    they would take the request under each method. Starlette's own 405 names only the first
+    route whose path matched, e.g. GET for /sessions/{id} although DELETE is there too."""
+    routes = request.app.router.routes
+    return [
+        method
+        for method in HTTP_METHODS
+        if any(route.matches({**request.scope, "method": method})[0] == Match.FULL for route in routes)
+    ]
+
+
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, error: ServiceError) -> JSONResponse:
@@ -64,12 +81,11 @@ def install_error_handlers(app: FastAPI) -> None:
         return validation_response(list(error.errors()))
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http_error(_: Request, error: StarletteHTTPException) -> JSONResponse:
-        return JSONResponse(
-            status_code=error.status_code,
-            content={"detail": error.detail},
-            headers=getattr(error, "headers", None),
-        )
+    async def _http_error(request: Request, error: StarletteHTTPException) -> JSONResponse:
+        headers = dict(getattr(error, "headers", None) or {})
+        if error.status_code == 405:
+            headers["Allow"] = ", ".join(allowed_methods(request))
+        return JSONResponse(status_code=error.status_code, content={"detail": error.detail}, headers=headers)
 
     @app.exception_handler(CheckpointError)
     async def _checkpoint(_: Request, error: CheckpointError) -> JSONResponse:

@@ -67,7 +67,18 @@ def require_api_key(
 
 
 Core = Annotated[PlanningService, Depends(core)]
-ERRORS = {code: {"model": ErrorResponse} for code in (400, 401, 404, 413, 415, 422, 503)}
+ERROR_CODES = (400, 401, 404, 413, 415, 422, 503)
+ERRORS = {code: {"model": ErrorResponse} for code in ERROR_CODES}
+
+
+def json_errors(*codes: int) -> dict[int | str, dict]:
+    """Error responses documented as JSON whatever the route's own media type: FastAPI would
+    otherwise give them the route's (text/html for a page), which is not what they send."""
+    schema = {"$ref": "#/components/schemas/ErrorResponse"}
+    return {
+        code: {"description": "Error", "content": {"application/json": {"schema": schema}}} for code in codes
+    }
+
 
 health = APIRouter(tags=["health"])
 api = APIRouter(dependencies=[Depends(require_api_key)], responses=ERRORS)
@@ -104,7 +115,7 @@ def model(service: Core) -> ModelInfo:
     return service.model_info()
 
 
-@api.post("/sessions", status_code=201, response_model=SessionInfo)
+@api.post("/sessions", status_code=201, response_model=SessionInfo, responses={409: {"model": ErrorResponse}})
 def create_session(service: Core, spec: SessionCreate | None = None) -> SessionInfo:
     """Open a session: an empty TSDF volume over the workspace (defaults: 0.30 m, 40³, at the world origin)."""
     return service.create_session(spec or SessionCreate())
@@ -132,6 +143,14 @@ def reset_session(service: Core, session_id: str) -> SessionInfo:
     return service.reset_session(session_id)
 
 
+#: FrameMeta's schema, its nested models referred to in the document's components (where
+#: SessionCreate already put them), so the meta part is described as what it must hold.
+FRAME_META_SCHEMA = {
+    key: value
+    for key, value in FrameMeta.model_json_schema(ref_template="#/components/schemas/{model}").items()
+    if key != "$defs"
+}
+
 FRAME_BODY = {
     "requestBody": {
         "required": True,
@@ -142,8 +161,8 @@ FRAME_BODY = {
                     "required": ["meta", "depth"],
                     "properties": {
                         "meta": {
-                            "type": "string",
-                            "description": "JSON FrameMeta (camera_pose, intrinsics, depth_scale, max_depth)",
+                            **FRAME_META_SCHEMA,
+                            "description": "FrameMeta as JSON (camera_pose, intrinsics, depth_scale, max_depth)",
                         },
                         "depth": {
                             "type": "string",
@@ -151,7 +170,8 @@ FRAME_BODY = {
                             "description": "16-bit PNG (image/png) or float32 metres (application/octet-stream)",
                         },
                     },
-                }
+                },
+                "encoding": {"meta": {"contentType": "application/json"}},
             },
             "application/octet-stream": {
                 "schema": {
@@ -174,8 +194,9 @@ FRAME_BODY = {
             "name": FRAME_META_HEADER,
             "in": "header",
             "required": False,
-            "schema": {"type": "string"},
-            "description": "JSON FrameMeta, required when the body is the bare depth image",
+            "content": {"application/json": {"schema": FRAME_META_SCHEMA}},
+            "description": "FrameMeta as JSON (see the multipart meta part), required when the body is the "
+            "bare depth image",
         }
     ],
 }
@@ -272,9 +293,11 @@ def tsdf(service: Core, session_id: str) -> Response:
     response_class=Response,
     responses={200: {"content": {NPY_MEDIA_TYPE: {}, PLY_MEDIA_TYPE: {}}}, 406: {"model": ErrorResponse}},
 )
-def cloud(service: Core, session_id: str, accept: Annotated[str | None, Header()] = None) -> Response:
+def cloud(service: Core, session_id: str, request: Request) -> Response:
     """Surface points and outward normals in the world frame: ``.npy`` (M, 6) float32 by
-    default, binary PLY with ``Accept: application/x-ply``."""
+    default, binary PLY with ``Accept: application/x-ply``; 406 for an ``Accept`` naming neither.
+    (``Accept`` is negotiated through the response media types, not declared as a parameter.)"""
+    accept = request.headers.get("accept")
     wanted = (accept or "*/*").lower()
     if PLY_MEDIA_TYPE in wanted:
         return Response(_ply(service.cloud(session_id)), media_type=PLY_MEDIA_TYPE)

@@ -11,13 +11,15 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Depends, HTTPException, Query
 from fastapi.responses import HTMLResponse
 
-from service.api.routes import ERRORS, Core, require_api_key
+from service.api.routes import ERROR_CODES, Core, json_errors, require_api_key
 from service.core import PlanningService
 from service.errors import ModelNotReady
 from service.viewer.page import ViewerUnavailable, render_page
 from service.viewer.scene import ViewQuery, build_scene
 
-viewer = APIRouter(dependencies=[Depends(require_api_key)], responses=ERRORS, tags=["viewer"])
+viewer = APIRouter(
+    dependencies=[Depends(require_api_key)], responses=json_errors(*ERROR_CODES), tags=["viewer"]
+)
 
 
 def scene_of(service: PlanningService, session_id: str, query: ViewQuery) -> dict[str, Any]:

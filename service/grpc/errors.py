@@ -27,6 +27,7 @@ from service.errors import (
     SessionNotFound,
     UnsupportedMediaType,
 )
+from service.grpc.handlers import MalformedRequest
 from service.settings import Settings
 from service.vgn.checkpoint import CheckpointError
 
@@ -101,6 +102,8 @@ def rpc(method: F) -> F:
     def wrapper(self, request: Any, context: grpc.ServicerContext) -> Any:
         started = time.perf_counter()
         failure, result = refusal(self.settings, context), None
+        if failure is None and isinstance(request, MalformedRequest):
+            failure = grpc.StatusCode.INVALID_ARGUMENT, request.describe(), 400
         if failure is None:
             try:
                 result = method(self, request, context)

@@ -9,10 +9,10 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 from grpc_reflection.v1alpha import reflection
 
-from client.grpc_api.grasp_planning_pb2_grpc import add_GraspPlanningServicer_to_server
 from service.api.metrics import ServiceMetrics
 from service.core import PlanningService
 from service.grpc.errors import SERVICE_NAME
+from service.grpc.handlers import add_servicer
 from service.grpc.servicer import GraspPlanning
 
 #: Room beside the depth bytes in one frame message (pose, intrinsics, field tags).
@@ -36,7 +36,7 @@ def build_server(
     ]
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=WORKERS, thread_name_prefix="vgn-grpc"),
                          options=options)  # fmt: skip
-    add_GraspPlanningServicer_to_server(GraspPlanning(core, metrics), server)
+    add_servicer(GraspPlanning(core, metrics), server)
     health_servicer = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
     reflection.enable_server_reflection((SERVICE_NAME, health.SERVICE_NAME, reflection.SERVICE_NAME), server)

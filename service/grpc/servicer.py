@@ -15,6 +15,7 @@ from service.api.metrics import ServiceMetrics
 from service.core import PlanningService
 from service.errors import InvalidInput, ServiceError, UnsupportedMediaType
 from service.grpc.errors import PayloadTooLarge, rpc, validation_message
+from service.grpc.handlers import MalformedRequest
 
 
 class GraspPlanning(GraspPlanningServicer):
@@ -58,6 +59,8 @@ class GraspPlanning(GraspPlanningServicer):
         for index, frame in enumerate(request_iterator):
             if not context.is_active():  # cancelled, or past its deadline
                 break
+            if isinstance(frame, MalformedRequest):
+                raise InvalidInput(f"frame {index}: {frame.describe()}")
             if frame.session_id and session_id and frame.session_id != session_id:
                 raise InvalidInput(
                     f"frame {index}: the stream is for session {session_id!r}, this frame names "
