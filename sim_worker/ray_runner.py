@@ -130,6 +130,8 @@ class SimWorker:
     def prepare_clutter(self, config, resolve: Callable) -> tuple[bool, str, Any]:
         """(service ready, its detail, ``config`` with the planner resolved by ``resolve``)."""
         readiness = self.vgn.ready()
+        if not readiness.ready and config.planner == "vgn":
+            return False, str(readiness.detail), config  # without weights there is nothing to resolve
         return readiness.ready, str(readiness.detail), resolve(config, self.vgn)
 
     def clutter_round(self, config, round_id: int):
@@ -219,6 +221,19 @@ def _progress(total: int, unit: str):
     from tqdm import tqdm
 
     return tqdm(total=total, unit=unit, file=sys.stderr)
+
+
+class RoundProgress:
+    """Updates a progress bar per finished round with the grasps attempted per second."""
+
+    def __init__(self, bar) -> None:
+        self.bar, self.attempts, self.started = bar, 0, time.perf_counter()
+
+    def __call__(self, record) -> None:
+        self.attempts += record.attempts
+        self.bar.update(1)
+        rate = self.attempts / (time.perf_counter() - self.started)
+        self.bar.set_postfix(grasps_per_s=f"{rate:.2f}", success=f"{record.successes}/{record.attempts}")
 
 
 def _node_split(nodes: Iterable[str]) -> str:
@@ -337,18 +352,8 @@ def clear_scene_on_ray(args, config, results_dir, resolve: Callable) -> int:
             print(f"resuming: {config.rounds - remaining} of {config.rounds} rounds already done",
                   file=sys.stderr)  # fmt: skip
         bar = _progress(remaining, "round")
-        attempts = 0
-        started = time.perf_counter()
-
-        def progress(record) -> None:
-            nonlocal attempts
-            attempts += record.attempts
-            bar.update(1)
-            bar.set_postfix(grasps_per_s=f"{attempts / (time.perf_counter() - started):.2f}",
-                            success=f"{record.successes}/{record.attempts}")  # fmt: skip
-
         try:
-            summary = clutter.run(config, results, progress)
+            summary = clutter.run(config, results, RoundProgress(bar))
         except Exception as error:
             print(f"error: a Ray worker failed: {error}\nfinished rounds are kept; rerun to resume",
                   file=sys.stderr)  # fmt: skip

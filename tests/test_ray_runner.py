@@ -162,3 +162,17 @@ def test_without_the_extra_ray_is_named(tmp_path, monkeypatch, capsys):
                      "--out", str(tmp_path / "data")])  # fmt: skip
     assert code == 2
     assert "pip install 'vgn-service[ray]'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_benchmark_on_ray_equals_a_single_process_run(ray_address, tmp_path):
+    from benchmarks.clutter import main
+
+    common = ["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "2",
+              "--renderer", "tiny"]  # fmt: skip
+    assert main([*common, "--out", str(tmp_path / "single")]) == 0
+    assert main([*common, "--out", str(tmp_path / "ray"), "--ray", ray_address, "--workers", "2"]) == 0
+    for name in ("rounds.csv", "grasps.csv"):
+        expected = rows_without_timings(tmp_path / "single" / "antipodal-best-blocks-5" / name)
+        assert expected, f"{name} holds rows"
+        assert rows_without_timings(tmp_path / "ray" / "antipodal-best-blocks-5" / name) == expected, name
