@@ -235,7 +235,7 @@ def run_on_ray(args: argparse.Namespace) -> int:
     service = {"model": args.model, "env": {"VGN_TORCH_THREADS": str(args.torch_threads)}}
     try:
         pool = ClutterPool(args.ray, args.workers, args.url, None, service)
-    except RayMissing as error:
+    except (RayMissing, ConnectionError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     try:

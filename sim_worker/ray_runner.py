@@ -17,6 +17,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 #: How often Ray restarts a dead worker, and retries the item it held, before the run gives up.
@@ -44,14 +45,32 @@ def import_ray():
 def connect(address: str | None) -> None:
     """Join the cluster at ``address`` ('auto' or host:port), or start a local instance when
     it is None or 'local'. A process already connected (a test, a notebook) is left as it is."""
+    joining = address not in (None, "local")
+    if joining and "RAY_AUTH_MODE" not in os.environ and _auth_token_available():
+        # Clusters started by `ray start` use token authentication; a joining driver must ask
+        # for it, before Ray loads (RAY_AUTH_MODE=disabled still opts out).
+        os.environ["RAY_AUTH_MODE"] = "token"
     ray = import_ray()
     if ray.is_initialized():
         return
     options: dict[str, Any] = {"include_dashboard": False, "logging_level": "WARNING", "log_to_driver": False}
-    if address in (None, "local"):
+    if not joining:
         ray.init(**options)
-    else:
+        return
+    try:
         ray.init(address=address, **options)
+    except ConnectionError as error:
+        raise ConnectionError(
+            f"{error}. Is the cluster up (`ray start --head`), and, where it uses token authentication, "
+            "is its token here (~/.ray/auth_token or RAY_AUTH_TOKEN)?"
+        ) from None
+
+
+def _auth_token_available() -> bool:
+    return (
+        bool(os.environ.get("RAY_AUTH_TOKEN") or os.environ.get("RAY_AUTH_TOKEN_PATH"))
+        or (Path.home() / ".ray" / "auth_token").is_file()
+    )
 
 
 def cluster_cpus() -> int:
@@ -250,7 +269,7 @@ def generate_on_ray(args, config, dataset, todo: list[int]) -> int:
 
     try:
         connect(args.ray)
-    except RayMissing as error:
+    except (RayMissing, ConnectionError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     if args.workers is not None and args.workers < 1:
@@ -334,7 +353,7 @@ def clear_scene_on_ray(args, config, results_dir, resolve: Callable) -> int:
         return 2
     try:
         clutter = ClutterPool(args.ray, args.workers, args.url, args.api_key, {"model": args.model})
-    except RayMissing as error:
+    except (RayMissing, ConnectionError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     try:
