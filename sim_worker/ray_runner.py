@@ -55,7 +55,7 @@ def connect(address: str | None) -> None:
         return
     options: dict[str, Any] = {"include_dashboard": False, "logging_level": "WARNING", "log_to_driver": False}
     if not joining:
-        ray.init(**options)
+        ray.init(address="local", **options)  # a new instance, even where `ray start` runs one
         return
     try:
         ray.init(address=address, **options)

@@ -24,7 +24,7 @@ SCENES = 3
 
 @pytest.fixture(scope="module")
 def ray_address() -> str:
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
     try:
         yield ray.get_runtime_context().gcs_address
     finally:
@@ -101,7 +101,6 @@ def _descends_from(pid: int, ancestor: int) -> bool:
     return False
 
 
-@pytest.mark.slow
 def test_a_worker_killed_mid_scene_still_gives_the_whole_dataset(
     one_worker_dataset: Path, ray_address, server, tmp_path
 ):
