@@ -80,6 +80,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="torch threads of the embedded service (default %(default)s: the simulator shares the CPU, "
         "and on a small CPU more threads than free cores slow the forward down several times)",
     )
+    parser.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+        help="spread each scenario's rounds over Ray workers: a local Ray instance, or 'auto' / an address "
+        "to join a cluster (needs the ray extra); the results equal a single-process run's",
+    )
+    parser.add_argument("--workers", type=int, help="with --ray: simulator workers (default: one per CPU)")
     parser.add_argument("--out", type=Path, default=Path("results/benchmark"))
     parser.add_argument(
         "--report",
@@ -113,16 +122,24 @@ def table_row(planner: str, selection: str, scenario: str, config: dict, summary
             "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
 
 
-def run_all(args: argparse.Namespace, vgn: VGNClient) -> list[dict]:
+def run_all(args: argparse.Namespace, vgn: VGNClient | None, ray_pool=None, progress=None) -> list[dict]:
+    """Every combination through ``vgn`` in this process, or over the Ray workers of ``ray_pool``
+    (``progress``: one progress bar over the rounds of all combinations)."""
     rows = []
     for planner, selection, scenario, folder in combinations(args):
-        config = resolve_planner(scenario_config(args, planner, selection, scenario), vgn)
-        results = ResultsFolder(folder, config.as_json())
-        episode = ClutterRemoval(config, vgn, results)
-        try:
-            summary = episode.run()
-        finally:
-            episode.close()
+        config = scenario_config(args, planner, selection, scenario)
+        if ray_pool is not None:
+            config = ray_pool.prepare(config, resolve_planner)[2]
+            results = ResultsFolder(folder, config.as_json())
+            progress.bar.update(len(results.finished_rounds() & set(range(config.rounds))))
+            summary = ray_pool.run(config, results, progress)
+        else:
+            config = resolve_planner(config, vgn)
+            episode = ClutterRemoval(config, vgn, ResultsFolder(folder, config.as_json()))
+            try:
+                summary = episode.run()
+            finally:
+                episode.close()
         rows.append(table_row(planner, selection, scenario, config.as_json(), summary))
         print(
             f"{planner:9s} {selection:6s} {scenario:9s} {format_row(rows[-1])}", file=sys.stderr, flush=True
@@ -188,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     if args.report:
         return write_table(report_all(args), args)
+    if args.ray is not None:
+        return run_on_ray(args)
     with contextlib.ExitStack() as stack:
         url = (
             args.url
@@ -205,6 +224,33 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: the vgn planner cannot run: {readiness.detail} (pass --model)", file=sys.stderr)
             return 2
         rows = run_all(args, vgn)
+    return write_table(rows, args)
+
+
+def run_on_ray(args: argparse.Namespace) -> int:
+    """The benchmark with its rounds on Ray workers (sim_worker.ray_runner), one embedded
+    service per node unless ``--url``."""
+    from sim_worker.ray_runner import ClutterPool, RayMissing, RoundProgress
+
+    service = {"model": args.model, "env": {"VGN_TORCH_THREADS": str(args.torch_threads)}}
+    try:
+        pool = ClutterPool(args.ray, args.workers, args.url, None, service)
+    except (RayMissing, ConnectionError) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    try:
+        ready, detail, _ = pool.prepare(
+            scenario_config(args, "antipodal", "best", args.scenarios[0]), resolve_planner
+        )
+        if "vgn" in args.planners and not ready:
+            print(f"error: the vgn planner cannot run: {detail} (pass --model)", file=sys.stderr)
+            return 2
+        from tqdm import tqdm
+
+        with tqdm(total=args.rounds * len(list(combinations(args))), unit="round", file=sys.stderr) as bar:
+            rows = run_all(args, None, pool, RoundProgress(bar))
+    finally:
+        pool.close()
     return write_table(rows, args)
 
 

@@ -110,7 +110,8 @@ def _add_generate_data(commands) -> None:
         help="object set ('blocks', 'pybullet') or URDF folder; repeat to mix (default: the scene's set)",
     )
     gen.add_argument("--scenes", type=int, default=10, help="scenes to generate (default %(default)s)")
-    gen.add_argument("--workers", type=int, default=1, help="simulator processes (default %(default)s)")
+    gen.add_argument("--workers", type=int,
+                     help="simulator processes (default 1; with --ray, one per CPU of the cluster)")  # fmt: skip
     gen.add_argument("--out", required=True, help="dataset folder (created or resumed)")
     gen.add_argument("--seed", type=int, default=0, help="scene i uses (seed, i); ids are s<seed>-<i>")
     gen.add_argument("--points", type=int, default=120, help="grasp points per scene (default %(default)s)")
@@ -155,6 +156,7 @@ def _add_clear_scene(commands) -> None:
     )
     clear.add_argument("--object-count", type=int, default=5, help="objects per round (default %(default)s)")
     clear.add_argument("--rounds", type=int, default=1, help="rounds to run (default %(default)s)")
+    clear.add_argument("--workers", type=int, help="with --ray: simulator workers (default: one per CPU)")
     clear.add_argument("--seed", type=int, default=1, help="scene seed; round r uses (seed, r)")
     clear.add_argument(
         "--threshold",
@@ -305,6 +307,13 @@ def _add_sim_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto",
                         help="PyBullet renderer: EGL when it loads, else TinyRenderer (same depth)")  # fmt: skip
+    add_ray_option(parser)
+
+
+def add_ray_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
+                        help="spread the work over Ray workers: a local Ray instance, or 'auto' / an address "
+                        "to join a running cluster (needs the ray extra)")  # fmt: skip
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -48,6 +48,10 @@ def run(args: argparse.Namespace) -> int:
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
     results_dir.mkdir(parents=True, exist_ok=True)
+    if getattr(args, "ray", None) is not None:  # the rounds spread over a Ray cluster instead
+        from sim_worker.ray_runner import clear_scene_on_ray
+
+        return clear_scene_on_ray(args, config, results_dir, resolve_planner)
     with contextlib.ExitStack() as stack:
         url = args.url
         if url is None:

@@ -118,7 +118,8 @@ class ClutterRemoval:
         started = time.perf_counter()
         rng = np.random.default_rng([self.config.seed, round_id])  # the same scene whenever it runs
         self.camera.rng = rng
-        self.world.clear_objects()
+        self.world.reset()  # the round depends on (seed, round) alone, not on earlier rounds
+        self.gripper = Gripper(self.world)
         generate_scene(self.world, self.config.scene, self.objects, self.config.object_count, rng)
         record = RoundRecord(round_id, f"{self.config.seed}-{round_id}", len(self.world.objects))
         failures = 0

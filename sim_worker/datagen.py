@@ -132,7 +132,8 @@ class SceneLabeller:
         or None when the scene came out empty."""
         rng = np.random.default_rng([self.config.seed, index])
         self.camera.rng = rng
-        self.world.clear_objects()
+        self.world.reset()  # the scene depends on (seed, index) alone, not on earlier scenes
+        self.gripper = Gripper(self.world)
         generate_scene(self.world, self.config.scene, self.objects, poisson_object_count(rng), rng)
         if not self.world.objects:
             return None

@@ -36,7 +36,7 @@ def _worker(url: str, api_key: str | None, out: str, config, indices: list[int],
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.workers < 1 or args.scenes < 0:
+    if (args.workers is not None and args.workers < 1) or args.scenes < 0:
         print("error: --workers must be >= 1 and --scenes >= 0", file=sys.stderr)
         return 2
     try:
@@ -64,6 +64,11 @@ def run(args: argparse.Namespace) -> int:
         return 2
     done = dataset.done_scene_ids()
     todo = [i for i in range(args.scenes) if scene_id(args.seed, i) not in done]
+    if getattr(args, "ray", None) is not None:  # the scenes spread over a Ray cluster instead
+        from sim_worker.ray_runner import generate_on_ray
+
+        return generate_on_ray(args, config, dataset, todo)
+    args.workers = args.workers or 1
     print(f"{args.scenes - len(todo)} of {args.scenes} scenes already in {out}; labelling {len(todo)} "
           f"with {args.workers} worker(s)", file=sys.stderr)  # fmt: skip
     if not todo:

@@ -74,13 +74,25 @@ class World:
         self.config = config
         self.p = BulletClient(connection_mode=pybullet.DIRECT)
         self.egl = renderer in ("egl", "auto") and self._load_egl(required=renderer == "egl")
-        self.p.setPhysicsEngineParameter(
-            fixedTimeStep=config.timestep, numSolverIterations=config.solver_iterations
-        )
-        self.p.setGravity(0.0, 0.0, config.gravity)
         self.objects: dict[int, SimObject] = {}
+        self._set_up()
+
+    def _set_up(self) -> None:
+        self.p.setPhysicsEngineParameter(
+            fixedTimeStep=self.config.timestep, numSolverIterations=self.config.solver_iterations
+        )
+        self.p.setGravity(0.0, 0.0, self.config.gravity)
+        self.objects = {}
         self.table = self._create_table()
         self.sim_time = 0.0
+
+    def reset(self) -> None:
+        """An empty table, as in a new world (the renderer stays loaded). Removing objects alone
+        is not enough for reproducible results: body ids and the solver's caches carry over and
+        shift later simulations slightly, so a scene would depend on what ran before it. Bodies
+        added by others (the gripper) are gone too and must be made again."""
+        self.p.resetSimulation()
+        self._set_up()
 
     def _load_egl(self, required: bool) -> bool:
         loader = pkgutil.get_loader("eglRenderer")
