@@ -136,7 +136,7 @@ class SessionStore:
     def delete(self, session_id: str) -> None:
         with self._lock:
             self._live(session_id, self._clock())
-            del self._sessions[session_id]
+            self._remove(session_id)
 
     def sweep(self) -> int:
         """Drop expired sessions; returns how many went."""
@@ -152,7 +152,7 @@ class SessionStore:
         if session is None:
             raise SessionNotFound(f"session {session_id!r} does not exist (or it expired)")
         if self._expired(session, now):
-            del self._sessions[session_id]
+            self._remove(session_id)
             raise SessionNotFound(f"session {session_id!r} expired after {self.ttl_s:g} s idle")
         return session
 
@@ -162,13 +162,18 @@ class SessionStore:
     def _drop_expired(self, now: float) -> int:
         expired = [sid for sid, s in self._sessions.items() if self._expired(s, now)]
         for session_id in expired:
-            del self._sessions[session_id]
+            self._remove(session_id)
         return len(expired)
+
+    def _remove(self, session_id: str) -> None:
+        """Forget a session and free the frames it queued for its cloud (a request still
+        holding it finishes on its own copy)."""
+        self._sessions.pop(session_id).volume.close()
 
     def _evict_one(self) -> None:
         for session_id, session in self._sessions.items():  # least recently used first
             if session.users == 0:
-                del self._sessions[session_id]
+                self._remove(session_id)
                 return
         raise CapacityExceeded(
             f"the session limit ({self.max_sessions}) is reached and every session is in use; "

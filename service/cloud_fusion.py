@@ -1,0 +1,107 @@
+"""Fusing queued frames into sessions' cloud volumes off the request path.
+
+Open3D holds the GIL for the whole of a fine (120³) integration (~25 ms), so fusing while
+frames stream in stalls every other request of the process, whichever thread does it. One
+shared worker therefore fuses a session's queued frames only when its uploads pause
+(``idle_s`` without a frame) or when an upload waits for room in a full queue. A burst of
+frames costs its senders the coarse fusion alone; the cloud catches up in the lull after.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Protocol
+
+logger = logging.getLogger(__name__)
+
+#: Quiet time after a session's last frame before the worker fuses its queue.
+IDLE_S = 0.05
+#: Queued bytes across all sessions past which uploads wait for the worker (memory bound).
+MAX_QUEUED_BYTES = 256 * 1024 * 1024
+
+
+class FusionQueue(Protocol):
+    """What the worker needs from a volume with queued frames (``SceneVolume``)."""
+
+    def fusion_due(self, now: float, idle_s: float) -> float | None:
+        """Seconds until it wants fusing (0: now), or None with nothing queued."""
+
+    def fuse_next(self) -> bool:
+        """Fuse its oldest queued frame; False when nothing was queued."""
+
+
+class CloudFusion:
+    """One daemon thread fusing queued frames of any number of volumes, oldest-due first."""
+
+    def __init__(self, idle_s: float = IDLE_S, max_queued_bytes: int = MAX_QUEUED_BYTES) -> None:
+        self.idle_s = idle_s
+        self.max_queued_bytes = max_queued_bytes
+        self._queues: set[FusionQueue] = set()
+        self._queued_bytes = 0
+        self._bytes_lock = threading.Lock()  # apart from _wake: volumes account holding their own lock
+        self._wake = threading.Condition()
+        self._thread: threading.Thread | None = None
+
+    # Called by volumes -----------------------------------------------------------------------
+    def notify(self, queue: FusionQueue) -> None:
+        """``queue`` has frames (or an upload now waits on it): look at it again."""
+        with self._wake:
+            self._queues.add(queue)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name="cloud-fusion", daemon=True)
+                self._thread.start()
+            self._wake.notify()
+
+    def forget(self, queue: FusionQueue) -> None:
+        with self._wake:
+            self._queues.discard(queue)
+
+    def account(self, delta_bytes: int) -> None:
+        with self._bytes_lock:
+            self._queued_bytes += delta_bytes
+
+    def over_budget(self) -> bool:
+        return self._queued_bytes >= self.max_queued_bytes
+
+    @property
+    def queued_bytes(self) -> int:
+        return self._queued_bytes
+
+    # The worker ------------------------------------------------------------------------------
+    def _next_due(self) -> FusionQueue | None:
+        """The queue to fuse now, waiting until one is due; call with ``_wake`` held."""
+        while True:
+            now, wait = time.monotonic(), None
+            for queue in list(self._queues):
+                delay = queue.fusion_due(now, self.idle_s)
+                if delay is None:
+                    self._queues.discard(queue)
+                elif delay <= 0:
+                    return queue
+                elif wait is None or delay < wait:
+                    wait = delay
+            self._wake.wait(wait)
+
+    def _run(self) -> None:
+        while True:
+            with self._wake:
+                queue = self._next_due()
+            try:
+                queue.fuse_next()
+            except Exception:  # a bad frame must not stop the cloud of every other session
+                logger.exception("fusing a queued frame into the cloud volume failed")
+
+
+_shared: CloudFusion | None = None
+_shared_lock = threading.Lock()
+
+
+def shared_fusion() -> CloudFusion:
+    """The process's worker, started on the first queued frame."""
+    global _shared
+    with _shared_lock:
+        if _shared is None:
+            _shared = CloudFusion()
+        return _shared

@@ -1,0 +1,172 @@
+"""The cloud volume's queue: compact frames, fused off the request path, bounded, never lost."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from client.http import VGNClient
+from service.cloud_fusion import CloudFusion
+from service.tsdf import SceneVolume, TSDFVolume, compact_depth
+from tests.scenes import INTRINSICS, BoxScene, circle_views
+
+SCENE = BoxScene()
+VOXEL = 0.3 / 120
+#: Views at 0.45, 0.6 and 0.8 m: the range over which ``compact_depth`` subsamples.
+VIEWS = (
+    circle_views(3, distance=0.45, tilt_deg=20) + circle_views(3) + circle_views(3, distance=0.8, tilt_deg=45)
+)
+DEPTHS = [SCENE.depth(pose) for pose in VIEWS]
+
+
+def volume(fusion: CloudFusion, max_pending: int = 16) -> SceneVolume:
+    return SceneVolume(0.3, 40, np.eye(4), cloud_resolution=120, max_pending=max_pending, fusion=fusion)
+
+
+def reference_cloud(indices: range | list[int]) -> np.ndarray:
+    """The same frames fused into a queue that never fills and is fused on reading."""
+    scene = volume(CloudFusion(idle_s=3600), max_pending=1000)
+    for k in indices:
+        scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+    return scene.cloud()
+
+
+def wait_until(predicate, timeout_s: float = 20.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+
+
+def test_compact_frames_give_the_cloud_of_full_frames_within_a_voxel():
+    """Float16 and 2x subsampled frames: every point within a voxel of the cloud of the
+    full-resolution float32 frames and the other way round, normals within 10° (p95)."""
+    full = TSDFVolume(0.3, 120)
+    for depth, pose in zip(DEPTHS, VIEWS, strict=True):
+        full.integrate(depth, INTRINSICS, pose, 2.0)
+    points, normals = full.surface_cloud()
+    cloud = reference_cloud(range(len(VIEWS)))
+    near, index = cKDTree(points).query(cloud[:, :3])
+    assert near.max() < VOXEL and cKDTree(cloud[:, :3]).query(points)[0].max() < VOXEL
+    cosine = np.clip(np.sum(cloud[:, 3:] * normals[index], axis=1), -1.0, 1.0)
+    assert np.percentile(np.degrees(np.arccos(cosine)), 95) < 10.0
+    compact, intrinsics = compact_depth(DEPTHS[4], INTRINSICS, VOXEL)
+    assert compact.dtype == np.float16 and compact.shape == (240, 320) and intrinsics.fx == INTRINSICS.fx / 2
+    assert compact.nbytes * 8 == DEPTHS[4].nbytes
+    far = np.full((480, 640), 1.5, np.float32)  # 2 pixels span 5.6 mm there: kept whole
+    assert compact_depth(far, INTRINSICS, VOXEL)[0].shape == (480, 640)
+
+
+def test_queue_is_bounded_and_no_frame_is_lost():
+    """A worker that never finds the uploads idle still makes room when the queue is full."""
+    scene = volume(CloudFusion(idle_s=3600), max_pending=3)
+    for k in range(len(VIEWS)):
+        scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+        assert scene.pending <= 3
+    np.testing.assert_allclose(scene.cloud(), reference_cloud(range(len(VIEWS))), atol=1e-6)
+    assert scene.pending == 0
+
+
+def test_byte_budget_bounds_all_queues_together():
+    one_frame = compact_depth(DEPTHS[4], INTRINSICS, VOXEL)[0].nbytes
+    fusion = CloudFusion(idle_s=3600, max_queued_bytes=3 * one_frame)
+    scenes = [volume(fusion, max_pending=100) for _ in range(2)]
+    for k in range(3, 9):
+        for scene in scenes:
+            scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+            assert fusion.queued_bytes <= 4 * one_frame  # a queue with nothing in it may take one
+    for scene in scenes:
+        np.testing.assert_allclose(scene.cloud(), reference_cloud(range(3, 9)), atol=1e-6)
+    assert fusion.queued_bytes == 0
+
+
+def test_worker_fuses_the_queue_once_uploads_pause():
+    scene = volume(CloudFusion(idle_s=0.01))
+    for k in range(4):
+        scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+    wait_until(lambda: scene.pending == 0)
+    np.testing.assert_allclose(scene.cloud(), reference_cloud(range(4)), atol=1e-6)
+
+
+def test_reset_while_the_worker_fuses_keeps_no_stale_frame():
+    fusion = CloudFusion(idle_s=0.0)
+    scene = volume(fusion)
+    for round_ in range(5):
+        for k in range(len(VIEWS)):
+            scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+        time.sleep(0.02 * round_)  # reset at different points of the worker's progress
+        scene.reset()
+        for k in (1, 4):
+            scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+        np.testing.assert_allclose(scene.cloud(), reference_cloud([1, 4]), atol=1e-6)
+        scene.reset()
+    assert fusion.queued_bytes == 0
+
+
+def test_closed_volume_frees_its_queue():
+    fusion = CloudFusion(idle_s=3600)
+    scene = volume(fusion)
+    scene.integrate(DEPTHS[0], INTRINSICS, VIEWS[0], 2.0)
+    assert fusion.queued_bytes > 0
+    scene.close()
+    scene.integrate(DEPTHS[1], INTRINSICS, VIEWS[1], 2.0)  # a request still holding it
+    assert fusion.queued_bytes == 0 and scene.pending == 0
+
+
+def test_concurrent_uploads_reads_and_resets_over_http(vgn: VGNClient):
+    """Uploads, cloud reads, resets and a delete racing on the real service; afterwards a
+    reset session fused with known frames gives exactly their cloud."""
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    doomed = vgn.create_session(intrinsics=INTRINSICS).session_id
+    stop, errors = threading.Event(), []
+
+    def loop(action) -> None:
+        with VGNClient(vgn.url) as client:
+            k = 0
+            while not stop.is_set():
+                try:
+                    action(client, k)
+                except Exception as error:  # noqa: BLE001 - collected and reported below
+                    errors.append(error)
+                    return
+                k += 1
+
+    def upload(client: VGNClient, k: int) -> None:
+        client.add_frame(session, DEPTHS[k % len(DEPTHS)], VIEWS[k % len(VIEWS)], max_depth=2.0)
+
+    def read(client: VGNClient, k: int) -> None:
+        assert client.cloud(session).shape[1] == 6
+
+    def reset(client: VGNClient, k: int) -> None:
+        client.reset_session(session)
+        time.sleep(0.03)
+
+    threads = [threading.Thread(target=loop, args=(action,)) for action in (upload, upload, read, reset)]
+    for k in range(3):
+        vgn.add_frame(doomed, DEPTHS[k], VIEWS[k], max_depth=2.0)
+    for thread in threads:
+        thread.start()
+    time.sleep(1.5)
+    vgn.delete_session(doomed)  # with frames queued for its cloud
+    time.sleep(1.0)
+    stop.set()
+    for thread in threads:
+        thread.join(timeout=60)
+    assert not errors, errors
+    vgn.reset_session(session)
+    for k in (2, 5, 7):
+        vgn.add_frame(session, DEPTHS[k], VIEWS[k], max_depth=2.0)
+    np.testing.assert_allclose(vgn.cloud(session), reference_cloud([2, 5, 7]), atol=1e-5)
+    assert vgn.session(session).frame_count == 3
+
+
+def test_a_burst_of_uploads_never_fuses_the_cloud_volume():
+    """Within the queue's bound an upload burst costs its senders the coarse volume only."""
+    frames = 40
+    scene = volume(CloudFusion(idle_s=3600), max_pending=frames)
+    for k in range(frames):
+        scene.integrate(DEPTHS[k % len(DEPTHS)], INTRINSICS, VIEWS[k % len(VIEWS)], 2.0)
+    assert scene.pending == frames and scene._fine is None
