@@ -1,10 +1,11 @@
 """Fusing queued frames into sessions' cloud volumes off the request path.
 
 Open3D holds the GIL for the whole of a fine (120³) integration (~25 ms), so fusing while
-frames stream in stalls every other request of the process, whichever thread does it. One
-shared worker therefore fuses a session's queued frames only when its uploads pause
-(``idle_s`` without a frame) or when an upload waits for room in a full queue. A burst of
-frames costs its senders the coarse fusion alone; the cloud catches up in the lull after.
+frames stream in stalls every request of the process, whichever thread does it. One shared
+worker therefore fuses queued frames only once no frame has arrived in the process for
+``idle_s``, or at once for a queue an upload waits on (full). And it spends the CPU only on
+clouds likely to be read: a session whose cloud was read before, or whose queue is past a
+quarter of its bound; the rest wait for a cloud read (most sessions only ask for grasps).
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ MAX_QUEUED_BYTES = 256 * 1024 * 1024
 class FusionQueue(Protocol):
     """What the worker needs from a volume with queued frames (``SceneVolume``)."""
 
-    def fusion_due(self, now: float, idle_s: float) -> float | None:
-        """Seconds until it wants fusing (0: now), or None with nothing queued."""
+    def fusion_wanted(self) -> tuple[bool, bool]:
+        """(worth fusing in a lull, wanted now: an upload waits for room)."""
 
     def fuse_next(self) -> bool:
         """Fuse its oldest queued frame; False when nothing was queued."""
@@ -40,14 +41,17 @@ class CloudFusion:
         self.max_queued_bytes = max_queued_bytes
         self._queues: set[FusionQueue] = set()
         self._queued_bytes = 0
+        self._last_frame_at = 0.0
         self._bytes_lock = threading.Lock()  # apart from _wake: volumes account holding their own lock
         self._wake = threading.Condition()
         self._thread: threading.Thread | None = None
 
     # Called by volumes -----------------------------------------------------------------------
-    def notify(self, queue: FusionQueue) -> None:
-        """``queue`` has frames (or an upload now waits on it): look at it again."""
+    def notify(self, queue: FusionQueue, frame: bool = False) -> None:
+        """``queue`` has frames (``frame``: one just arrived) or an upload waits on it."""
         with self._wake:
+            if frame:
+                self._last_frame_at = time.monotonic()
             self._queues.add(queue)
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name="cloud-fusion", daemon=True)
@@ -70,19 +74,22 @@ class CloudFusion:
         return self._queued_bytes
 
     # The worker ------------------------------------------------------------------------------
-    def _next_due(self) -> FusionQueue | None:
+    def _next_due(self) -> FusionQueue:
         """The queue to fuse now, waiting until one is due; call with ``_wake`` held."""
         while True:
-            now, wait = time.monotonic(), None
+            lull = self._last_frame_at + self.idle_s - time.monotonic()
+            in_lull = None
             for queue in list(self._queues):
-                delay = queue.fusion_due(now, self.idle_s)
-                if delay is None:
-                    self._queues.discard(queue)
-                elif delay <= 0:
+                worth, now = queue.fusion_wanted()
+                if now:
                     return queue
-                elif wait is None or delay < wait:
-                    wait = delay
-            self._wake.wait(wait)
+                if not worth:
+                    self._queues.discard(queue)  # notified again when that changes
+                elif in_lull is None:
+                    in_lull = queue
+            if in_lull is not None and lull <= 0:
+                return in_lull
+            self._wake.wait(lull if in_lull is not None else None)
 
     def _run(self) -> None:
         while True:

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
+from service.cloud_fusion import CloudFusion, shared_fusion
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
 from service.tsdf import SceneVolume
 
@@ -75,13 +76,15 @@ class SessionStore:
         max_sessions: int,
         ttl_s: float,
         cloud_resolution: int,
-        cloud_max_pending: int = 16,
+        cloud_max_pending: int = 512,
         clock: Callable[[], float] = time.time,
+        cloud_fusion: CloudFusion | None = None,
     ) -> None:
         self.max_sessions = max_sessions
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
         self._cloud_max_pending = cloud_max_pending
+        self._cloud_fusion = cloud_fusion or shared_fusion()
         self._clock = clock
         self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()
@@ -95,6 +98,7 @@ class SessionStore:
             workspace.pose.as_matrix(),
             self._cloud_resolution,
             self._cloud_max_pending,
+            self._cloud_fusion,
         )
         with self._lock:
             self._drop_expired(now)

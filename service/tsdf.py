@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 from collections import deque
 from dataclasses import dataclass
 
@@ -142,8 +141,9 @@ class SceneVolume:
 
     The fine volume (120³) costs ~15-25x the coarse one to integrate (~25 ms a frame) and
     only cloud readers need it, so an upload fuses the coarse volume and queues a compact copy
-    of the frame (``compact_depth``); the shared ``CloudFusion`` worker fuses the queue when
-    uploads pause, and a cloud read fuses what is left. Memory stays bounded: at
+    of the frame (``compact_depth``), never fusing the fine one. The shared ``CloudFusion``
+    worker fuses the queue in lulls between uploads once the session's cloud has been read or
+    its queue is a quarter full; a cloud read fuses what is left. Memory stays bounded: at
     ``max_pending`` queued frames, or with the process's queues over their byte budget, an
     upload waits for the worker to make room. No frame is dropped.
 
@@ -155,7 +155,7 @@ class SceneVolume:
     """
 
     def __init__(self, size: float, resolution: int, workspace_pose: np.ndarray, cloud_resolution: int,
-                 max_pending: int = 16, fusion: CloudFusion | None = None):  # fmt: skip
+                 max_pending: int = 512, fusion: CloudFusion | None = None):  # fmt: skip
         self.max_pending = max_pending
         self.workspace_pose = np.asarray(workspace_pose, dtype=np.float64)
         self._world_to_workspace = invert(self.workspace_pose)
@@ -166,7 +166,8 @@ class SceneVolume:
         self._fusing = threading.Lock()
         self._pending: deque[QueuedFrame] = deque()
         self._fine: TSDFVolume | None = None
-        self._last_frame_at = 0.0
+        self._cloud_read = False  # then the worker keeps its volume fused in the background
+        self._draining = False  # a quarter full: fused to the end in lulls, read or not
         self._waiting = 0
         self._closed = False
         self.coarse = TSDFVolume(size, resolution)
@@ -202,7 +203,6 @@ class SceneVolume:
                 if not (self._pending and self._full()):
                     self._pending.append(frame)
                     self._fusion.account(frame.nbytes)
-                    self._last_frame_at = time.monotonic()
                     break
                 self._waiting += 1  # makes the queue due for the worker at once
             self._fusion.notify(self)  # never with _lock held: the worker takes its lock first
@@ -212,7 +212,7 @@ class SceneVolume:
                         self._room.wait()
                 finally:
                     self._waiting -= 1
-        self._fusion.notify(self)
+        self._fusion.notify(self, frame=True)
 
     def grid(self) -> np.ndarray:
         """The network input, (N, N, N) float32 in the workspace frame (see ``TSDFVolume.grid``)."""
@@ -220,6 +220,7 @@ class SceneVolume:
 
     def cloud(self) -> np.ndarray:
         """(M, 6) float32 points and unit normals of the fused surface in the *world* frame."""
+        self._cloud_read = True
         with self._fusing:
             while self._fuse_oldest():
                 pass
@@ -232,13 +233,13 @@ class SceneVolume:
         return np.hstack([world_points, world_normals]).astype(np.float32)
 
     # For the worker (service.cloud_fusion.FusionQueue) -----------------------------------------
-    def fusion_due(self, now: float, idle_s: float) -> float | None:
+    def fusion_wanted(self) -> tuple[bool, bool]:
         with self._lock:
             if not self._pending:
-                return None
-            if self._waiting:
-                return 0.0
-            return self._last_frame_at + idle_s - now
+                self._draining = False
+                return False, False
+            self._draining = self._draining or len(self._pending) * 4 >= self.max_pending
+            return self._cloud_read or self._draining, self._waiting > 0
 
     def fuse_next(self) -> bool:
         with self._fusing:

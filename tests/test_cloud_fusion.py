@@ -83,12 +83,30 @@ def test_byte_budget_bounds_all_queues_together():
     assert fusion.queued_bytes == 0
 
 
-def test_worker_fuses_the_queue_once_uploads_pause():
-    scene = volume(CloudFusion(idle_s=0.01))
-    for k in range(4):
+def test_worker_fuses_in_lulls_once_the_cloud_was_read():
+    fusion = CloudFusion(idle_s=0.01)
+    scene, lazy = volume(fusion), volume(fusion)
+    assert len(scene.cloud()) == 0  # a cloud reader: kept fused in the background from now on
+    for k in range(3):
         scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+        lazy.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
     wait_until(lambda: scene.pending == 0)
-    np.testing.assert_allclose(scene.cloud(), reference_cloud(range(4)), atol=1e-6)
+    time.sleep(0.1)
+    assert lazy.pending == 3, "a session never read and a queue under a quarter full waits for a read"
+    lazy.integrate(DEPTHS[3], INTRINSICS, VIEWS[3], 2.0)  # 4 of 16: worth fusing now
+    wait_until(lambda: lazy.pending == 0)
+    np.testing.assert_allclose(scene.cloud(), reference_cloud(range(3)), atol=1e-6)
+    np.testing.assert_allclose(lazy.cloud(), reference_cloud(range(4)), atol=1e-6)
+
+
+def test_no_fusion_while_frames_keep_arriving():
+    fusion = CloudFusion(idle_s=0.2)
+    scene = volume(fusion)
+    scene.cloud()
+    for k in range(6):  # ~10 ms apart, well inside the lull
+        scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+        assert scene.pending == k + 1
+    wait_until(lambda: scene.pending == 0)
 
 
 def test_reset_while_the_worker_fuses_keeps_no_stale_frame():
