@@ -52,6 +52,8 @@ class CloudFusion:
         with self._wake:
             if frame:
                 self._last_frame_at = time.monotonic()
+                if queue in self._queues:
+                    return  # the worker's lull timer already covers it: no wake-up per frame
             self._queues.add(queue)
             if self._thread is None:
                 self._thread = threading.Thread(target=self._run, name="cloud-fusion", daemon=True)
