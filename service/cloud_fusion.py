@@ -6,6 +6,9 @@ worker therefore fuses queued frames only once no frame has arrived in the proce
 ``idle_s``, or at once for a queue an upload waits on (full). And it spends the CPU only on
 clouds likely to be read: a session whose cloud was read before, or whose queue is past a
 quarter of its bound; the rest wait for a cloud read (most sessions only ask for grasps).
+
+The thread starts on the first frame, ends after ``linger_s`` with nothing queued (a service
+built per test or per request leaves no thread behind) and on ``close``.
 """
 
 from __future__ import annotations
@@ -21,6 +24,8 @@ logger = logging.getLogger(__name__)
 IDLE_S = 0.05
 #: Queued bytes across all sessions past which uploads wait for the worker (memory bound).
 MAX_QUEUED_BYTES = 256 * 1024 * 1024
+#: Seconds the worker thread waits with nothing queued before it ends (restarted on demand).
+LINGER_S = 5.0
 
 
 class FusionQueue(Protocol):
@@ -36,9 +41,13 @@ class FusionQueue(Protocol):
 class CloudFusion:
     """One daemon thread fusing queued frames of any number of volumes, oldest-due first."""
 
-    def __init__(self, idle_s: float = IDLE_S, max_queued_bytes: int = MAX_QUEUED_BYTES) -> None:
+    def __init__(
+        self, idle_s: float = IDLE_S, max_queued_bytes: int = MAX_QUEUED_BYTES, linger_s: float = LINGER_S
+    ) -> None:
         self.idle_s = idle_s
         self.max_queued_bytes = max_queued_bytes
+        self.linger_s = linger_s
+        self.closed = False
         self._queues: set[FusionQueue] = set()
         self._queued_bytes = 0
         self._last_frame_at = 0.0
@@ -50,6 +59,8 @@ class CloudFusion:
     def notify(self, queue: FusionQueue, frame: bool = False) -> None:
         """``queue`` has frames (``frame``: one just arrived) or an upload waits on it."""
         with self._wake:
+            if self.closed:
+                return
             if frame:
                 self._last_frame_at = time.monotonic()
                 if queue in self._queues:
@@ -64,6 +75,23 @@ class CloudFusion:
         with self._wake:
             self._queues.discard(queue)
 
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Stop the worker (after the frame it is fusing) and take no more work. Close the
+        volumes first: an upload waiting for room is woken by its volume's ``close``."""
+        with self._wake:
+            self.closed = True
+            self._queues.clear()
+            thread = self._thread
+            self._wake.notify_all()
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout_s)
+
+    @property
+    def running(self) -> bool:
+        """Whether the worker thread is alive (it ends when idle or closed)."""
+        thread = self._thread
+        return thread is not None and thread.is_alive()
+
     def account(self, delta_bytes: int) -> None:
         with self._bytes_lock:
             self._queued_bytes += delta_bytes
@@ -76,9 +104,11 @@ class CloudFusion:
         return self._queued_bytes
 
     # The worker ------------------------------------------------------------------------------
-    def _next_due(self) -> FusionQueue:
-        """The queue to fuse now, waiting until one is due; call with ``_wake`` held."""
-        while True:
+    def _next_due(self) -> FusionQueue | None:
+        """The queue to fuse now, waiting until one is due; None when closed or after
+        ``linger_s`` with nothing queued. Call with ``_wake`` held."""
+        idle_since = time.monotonic()
+        while not self.closed:
             lull = self._last_frame_at + self.idle_s - time.monotonic()
             in_lull = None
             for queue in list(self._queues):
@@ -89,14 +119,25 @@ class CloudFusion:
                     self._queues.discard(queue)  # notified again when that changes
                 elif in_lull is None:
                     in_lull = queue
-            if in_lull is not None and lull <= 0:
-                return in_lull
-            self._wake.wait(lull if in_lull is not None else None)
+            if in_lull is not None:
+                if lull <= 0:
+                    return in_lull
+                self._wake.wait(lull)
+                idle_since = time.monotonic()
+                continue
+            idle = time.monotonic() - idle_since  # nothing queued worth fusing
+            if idle >= self.linger_s:
+                return None
+            self._wake.wait(self.linger_s - idle)
+        return None
 
     def _run(self) -> None:
         while True:
             with self._wake:
                 queue = self._next_due()
+                if queue is None:
+                    self._thread = None  # a later frame starts another
+                    return
             try:
                 queue.fuse_next()
             except Exception:  # a bad frame must not stop the cloud of every other session

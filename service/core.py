@@ -70,6 +70,10 @@ class PlanningService:
         )
         return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
 
+    def close(self) -> None:
+        """Free the sessions and end the cloud worker thread (at shutdown)."""
+        self.sessions.close()
+
     # Sessions -----------------------------------------------------------------------------
     def create_session(self, spec: SessionCreate) -> SessionInfo:
         return self.sessions.create(spec).info(self.sessions.ttl_s)

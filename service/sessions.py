@@ -84,7 +84,7 @@ class SessionStore:
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
         self._cloud_max_pending = cloud_max_pending
-        self._cloud_fusion = cloud_fusion or shared_fusion()
+        self.cloud_fusion = cloud_fusion or shared_fusion()
         self._clock = clock
         self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()
@@ -98,7 +98,7 @@ class SessionStore:
             workspace.pose.as_matrix(),
             self._cloud_resolution,
             self._cloud_max_pending,
-            self._cloud_fusion,
+            self.cloud_fusion,
         )
         with self._lock:
             self._drop_expired(now)
@@ -146,6 +146,13 @@ class SessionStore:
         """Drop expired sessions; returns how many went."""
         with self._lock:
             return self._drop_expired(self._clock())
+
+    def close(self) -> None:
+        """Drop every session and stop the cloud worker (the service shuts down)."""
+        with self._lock:
+            for session_id in list(self._sessions):
+                self._remove(session_id)
+        self.cloud_fusion.close()
 
     def __len__(self) -> int:
         return len(self._sessions)

@@ -184,7 +184,8 @@ class SceneVolume:
             self._drop_pending()
 
     def close(self) -> None:
-        """The session is gone: free the queue and take no more frames for the cloud."""
+        """The session is gone: free the queue and take no more frames for the cloud (an
+        upload waiting for room returns)."""
         with self._lock:
             self._closed = True
             self._drop_pending()
@@ -193,12 +194,13 @@ class SceneVolume:
     def integrate(self, depth: np.ndarray, intrinsics: Intrinsics, camera_pose: np.ndarray, max_depth: float):
         """Fuse a depth image (metres) taken from ``camera_pose`` (camera → world)."""
         camera_in_workspace = self._world_to_workspace @ camera_pose
-        self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
+        # Everything that could fail runs before the first volume changes.
         compact, compact_intrinsics = compact_depth(depth, intrinsics, self._size / self._cloud_resolution)
         frame = QueuedFrame(compact, compact_intrinsics, camera_in_workspace, max_depth)
+        self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
         while True:
             with self._lock:
-                if self._closed:
+                if self._closed or self._fusion.closed:  # the session or the service is gone
                     return
                 if not (self._pending and self._full()):
                     self._pending.append(frame)
@@ -208,7 +210,7 @@ class SceneVolume:
             self._fusion.notify(self)  # never with _lock held: the worker takes its lock first
             with self._lock:
                 try:
-                    if not self._closed and self._pending and self._full():
+                    if not (self._closed or self._fusion.closed) and self._pending and self._full():
                         self._room.wait()
                 finally:
                     self._waiting -= 1
@@ -260,8 +262,7 @@ class SceneVolume:
                 self._fine = TSDFVolume(self._size, self._cloud_resolution)
             fine = self._fine
         try:
-            fine.integrate(frame.depth.astype(np.float32), frame.intrinsics, frame.camera_in_workspace,
-                           frame.max_depth)  # fmt: skip
+            fine.integrate(frame.depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
         finally:  # a frame Open3D refuses is dropped rather than retried forever
             with self._lock:
                 if self._fine is fine and self._pending and self._pending[0] is frame:  # else reset

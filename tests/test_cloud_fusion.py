@@ -5,11 +5,18 @@ from __future__ import annotations
 import threading
 import time
 
+import httpx
 import numpy as np
+import pytest
+from fastapi.testclient import TestClient
 from scipy.spatial import cKDTree
 
 from client.http import VGNClient
+from client.schemas import SessionCreate
+from service.app import create_app
 from service.cloud_fusion import CloudFusion
+from service.core import PlanningService
+from service.settings import Settings
 from service.tsdf import SceneVolume, TSDFVolume, compact_depth
 from tests.scenes import INTRINSICS, BoxScene, circle_views
 
@@ -188,3 +195,113 @@ def test_a_burst_of_uploads_never_fuses_the_cloud_volume():
     for k in range(frames):
         scene.integrate(DEPTHS[k % len(DEPTHS)], INTRINSICS, VIEWS[k % len(VIEWS)], 2.0)
     assert scene.pending == frames and scene._fine is None
+
+
+def test_the_worker_thread_ends_when_idle_and_on_close():
+    fusion = CloudFusion(idle_s=0.01, linger_s=1.0)
+    scene = volume(fusion)
+    scene.cloud()
+    scene.integrate(DEPTHS[0], INTRINSICS, VIEWS[0], 2.0)
+    assert fusion.running
+    wait_until(lambda: scene.pending == 0 and not fusion.running)
+    scene.integrate(DEPTHS[1], INTRINSICS, VIEWS[1], 2.0)  # starts it again
+    assert fusion.running
+    wait_until(lambda: scene.pending == 0)
+    fusion.close()
+    np.testing.assert_allclose(scene.cloud(), reference_cloud([0, 1]), atol=1e-6)
+    assert not fusion.running
+    scene.integrate(DEPTHS[2], INTRINSICS, VIEWS[2], 2.0)  # after shutdown: no thread, no queue
+    assert not fusion.running and scene.pending == 0
+
+
+def test_service_shutdown_stops_the_worker_and_frees_every_queue(settings: Settings):
+    with TestClient(create_app(settings)) as http:
+        core: PlanningService = http.app.state.core
+        fusion = core.sessions.cloud_fusion
+        session = http.post("/sessions", json={"intrinsics": INTRINSICS.model_dump()}).json()["session_id"]
+        assert http.get(f"/sessions/{session}/cloud").status_code == 200  # a reader: fused when idle
+        for k in range(6):
+            meta = {"camera_pose": {"matrix": VIEWS[k].tolist()}, "max_depth": 2.0}
+            files = {"meta": (None, str(meta).replace("'", '"')), "depth": ("d", DEPTHS[k].tobytes())}
+            assert http.post(f"/sessions/{session}/frames", files=files).status_code == 200
+        assert fusion.running and fusion.queued_bytes > 0
+    assert not fusion.running and fusion.closed and fusion.queued_bytes == 0
+    assert len(core.sessions) == 0
+
+
+def test_expiry_while_the_worker_fuses(random_checkpoint):
+    """Sessions expiring and swept while the worker fuses their frames: their queues
+    are freed, and the worker goes on fusing the sessions that remain."""
+    core = PlanningService.from_settings(Settings(model=random_checkpoint, api_key=None))
+    fusion = core.sessions.cloud_fusion
+    try:
+        doomed = [core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id for _ in range(3)]
+        for session in doomed:
+            core.cloud(session)  # readers: the worker fuses them in the lull after the uploads
+            for k in range(len(VIEWS)):
+                core.add_frame(session, DEPTHS[k], VIEWS[k], max_depth=2.0)
+        wait_until(lambda: fusion.queued_bytes < 3 * len(VIEWS) * DEPTHS[0].nbytes / 8)  # under way
+        ttl_s, core.sessions.ttl_s = core.sessions.ttl_s, 0.0  # every idle session is past it now
+        assert core.sessions.sweep() == 3
+        core.sessions.ttl_s = ttl_s
+        assert fusion.queued_bytes == 0
+        kept = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+        core.cloud(kept)
+        for k in (0, 4, 8):
+            core.add_frame(kept, DEPTHS[k], VIEWS[k], max_depth=2.0)
+        wait_until(lambda: fusion.queued_bytes == 0)  # fused in the background
+        np.testing.assert_allclose(core.cloud(kept), reference_cloud([0, 4, 8]), atol=1e-6)
+    finally:
+        core.close()
+    assert not fusion.running
+
+
+def test_coarse_grid_is_fused_by_the_upload_itself(vgn: VGNClient):
+    """The grid the network plans on reflects each frame as soon as its upload returns."""
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    coarse = TSDFVolume(0.3, 40)
+    for k in (3, 4, 5):
+        vgn.add_frame(session, DEPTHS[k], VIEWS[k], max_depth=2.0)
+        coarse.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+        np.testing.assert_array_equal(vgn.tsdf(session), coarse.grid())
+
+
+def test_cloud_and_viewer_right_after_uploads_hold_every_frame(vgn: VGNClient):
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    order = [k % len(VIEWS) for k in range(30)]
+    for k in order:
+        vgn.add_frame(session, DEPTHS[k], VIEWS[k], max_depth=2.0)
+    view = httpx.get(f"{vgn.url}/sessions/{session}/view/data", params={"threshold": 0.99}, timeout=120)
+    assert view.status_code == 200, view.text
+    expected = reference_cloud(order)
+    assert view.json()["cloud"]["total"] == len(expected)  # the viewer drained the queue first
+    np.testing.assert_allclose(vgn.cloud(session), expected, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("body", "meta", "words"),
+    [
+        (b"\0" * 100, {}, "raw depth must be 640x480"),
+        (None, {"max_depth": -1.0}, "max_depth"),
+        (None, {"camera_pose": {"matrix": [[1, 0], [0, 1]]}}, "camera_pose"),
+    ],
+)
+def test_a_rejected_frame_changes_neither_volume(vgn: VGNClient, body, meta, words):
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    vgn.add_frame(session, DEPTHS[1], VIEWS[1], max_depth=2.0)
+    grid, cloud = vgn.tsdf(session), vgn.cloud(session)
+    vgn.add_frame(session, DEPTHS[2], VIEWS[2], max_depth=2.0)  # queued, not fused yet
+    full_meta = {"camera_pose": {"matrix": VIEWS[3].tolist()}, "max_depth": 2.0, **meta}
+    files = {
+        "meta": (None, str(full_meta).replace("'", '"')),
+        "depth": ("d", body if body is not None else DEPTHS[3].tobytes(), "application/octet-stream"),
+    }
+    answer = httpx.post(f"{vgn.url}/sessions/{session}/frames", files=files, timeout=60)
+    assert 400 <= answer.status_code < 500 and words in answer.text, answer.text
+    assert vgn.session(session).frame_count == 2
+    reference = SceneVolume(0.3, 40, np.eye(4), cloud_resolution=120, fusion=CloudFusion(idle_s=3600))
+    for k in (1, 2):
+        reference.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
+    np.testing.assert_array_equal(vgn.tsdf(session), reference.grid())
+    np.testing.assert_allclose(vgn.cloud(session), reference.cloud(), atol=1e-5)
+    assert not np.array_equal(vgn.tsdf(session), grid) and len(cloud)  # frame 2 did count
