@@ -11,7 +11,10 @@ gRPC rows differ only in the transport. Measured:
 * a stream of ``STREAM_FRAMES`` frames: ``GRPCClient.stream_frames`` (one call), against the
   same frames uploaded one request after another over HTTP; reported as frames per second;
 * a long stream of ``LONG_STREAM_FRAMES`` frames over gRPC, beside fusing the same frames
-  into a bare coarse ``TSDFVolume`` in this process (what a frame costs at the least).
+  into a bare coarse ``TSDFVolume`` in this process (what a frame costs at the least);
+* the cost the queue moves to the reader: ``GRPCClient.cloud`` right after a stream of
+  ``STREAM_FRAMES`` frames (posted untimed), which fuses the frames still queued, beside
+  fusing the same frames into a bare 120³ ``TSDFVolume`` in this process.
 
 Targets: gRPC frame upload p50 no slower than HTTP's (ratio <= 1), streaming >= 150 frames/s,
 the long stream included.
@@ -49,6 +52,8 @@ from service.tsdf import TSDFVolume
 STREAM_FRAMES = 60
 LONG_STREAM_FRAMES = 300
 STREAM_RATE_TARGET = 150.0
+#: The service's default ``VGN_CLOUD_RESOLUTION``.
+CLOUD_RESOLUTION = 120
 FRAME_HTTP = "HTTP VGNClient.add_frame (raw f32)"
 FRAME_GRPC = "gRPC GRPCClient.add_frame (raw f32)"
 GRASPS_HTTP = "HTTP VGNClient.grasps"
@@ -57,6 +62,8 @@ STREAM_HTTP = f"HTTP {STREAM_FRAMES} add_frame calls"
 STREAM_GRPC = f"gRPC stream_frames ({STREAM_FRAMES} frames)"
 LONG_STREAM_GRPC = f"gRPC stream_frames ({LONG_STREAM_FRAMES} frames)"
 LONG_STREAM_COARSE = f"TSDFVolume.integrate, coarse 40³ only ({LONG_STREAM_FRAMES} frames, in process)"
+CLOUD_AFTER_STREAM = f"gRPC cloud right after a {STREAM_FRAMES}-frame stream"
+FINE_FUSION = f"TSDFVolume.integrate, fine {CLOUD_RESOLUTION}³ ({STREAM_FRAMES} frames, in process)"
 
 
 def frame_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[Operation]:
@@ -140,6 +147,30 @@ def long_stream_operations(rpc: GRPCClient, frames: Frames) -> list[Operation]:
     ]
 
 
+def cloud_read_operations(rpc: GRPCClient, frames: Frames) -> list[Operation]:
+    """A cloud read after a stream, and the bare fine fusion of the stream's frames."""
+    n, group = len(frames), "13 cloud read|fine fusion"
+    batch = [(frames.depths[i % n], frames.poses[i % n]) for i in range(STREAM_FRAMES)]
+    session_id = rpc.create_session(intrinsics=INTRINSICS).session_id
+
+    def stream(_: int) -> None:
+        rpc.reset_session(session_id)
+        rpc.stream_frames(session_id, batch, max_depth=MAX_DEPTH)
+
+    def read(_: int) -> None:
+        assert len(rpc.cloud(session_id)) > 0
+
+    def fine_only(_: int) -> None:
+        volume = TSDFVolume(WORKSPACE_SIZE, CLOUD_RESOLUTION)
+        for depth, pose in batch:
+            volume.integrate(depth, INTRINSICS, pose, MAX_DEPTH)
+
+    return [
+        Operation(FINE_FUSION, group, fine_only, "baseline"),
+        Operation(CLOUD_AFTER_STREAM, group, read, "", stream),
+    ]
+
+
 def measure(weights: Path, threads: int | None, device: str, frames: Frames, repeats: int, warmup: int,
             interleaved: bool) -> list[Measurement]:  # fmt: skip
     """The gRPC rows and their HTTP twins, from one server serving both; without ``threads``
@@ -160,6 +191,7 @@ def measure(weights: Path, threads: int | None, device: str, frames: Frames, rep
         stream_repeats = max(3, repeats // 5)
         rows += schedule(stream_operations(http, rpc, frames), stream_repeats, min(warmup, 1))
         rows += schedule(long_stream_operations(rpc, frames), max(3, repeats // 10), min(warmup, 1))
+        rows += schedule(cloud_read_operations(rpc, frames), max(3, repeats // 10), min(warmup, 1))
     return rows
 
 
@@ -200,10 +232,13 @@ def format_rates(rows: list[Measurement]) -> str:
     http, rpc = frames_per_second(find(rows, STREAM_HTTP)), frames_per_second(find(rows, STREAM_GRPC))
     long = find(rows, LONG_STREAM_GRPC).p50 / LONG_STREAM_FRAMES
     coarse = find(rows, LONG_STREAM_COARSE).p50 / LONG_STREAM_FRAMES
+    read, fine = find(rows, CLOUD_AFTER_STREAM).p50, find(rows, FINE_FUSION).p50
     return (
         f"frames per second: HTTP one request per frame {http:.1f}, gRPC stream {rpc:.1f} ({rpc / http:.2f}x)\n"
         f"{LONG_STREAM_FRAMES}-frame gRPC stream: {1e3 / long:.1f} frames/s, {long:.2f} ms a frame = "
-        f"{long / coarse:.2f}x the bare coarse fusion ({coarse:.2f} ms)"
+        f"{long / coarse:.2f}x the bare coarse fusion ({coarse:.2f} ms)\n"
+        f"cloud read right after a {STREAM_FRAMES}-frame stream: {read:.0f} ms = {read / fine:.2f}x the "
+        f"bare fine fusion of those frames ({fine:.0f} ms): the cost the queue moves from uploads to readers"
     )
 
 

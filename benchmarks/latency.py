@@ -26,8 +26,8 @@ One run measures the p50 and p95 latency (milliseconds) of
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
    own client and session), which the service micro-batches into shared forward passes;
 9. with the grpc extra (unless ``--skip-grpc``), the gRPC front end beside its HTTP twins on
-   one server serving both (``benchmarks.grpc_latency``): a frame upload, a grasp request and
-   a 60-frame stream;
+   one server serving both (``benchmarks.grpc_latency``): a frame upload, a grasp request,
+   a 60-frame and a 300-frame stream, and a cloud read right after a 60-frame stream;
 
 and checks the project's targets:
 
