@@ -20,10 +20,10 @@ from typing import Protocol
 
 logger = logging.getLogger(__name__)
 
-#: Quiet time after a session's last frame before the worker fuses its queue.
+#: Quiet time after the last frame the process received before the worker fuses a queue.
 IDLE_S = 0.05
 #: Queued bytes across all sessions past which uploads wait for the worker (memory bound).
-MAX_QUEUED_BYTES = 256 * 1024 * 1024
+MAX_QUEUED_BYTES = 512 * 1024 * 1024
 #: Seconds the worker thread waits with nothing queued before it ends (restarted on demand).
 LINGER_S = 5.0
 
@@ -39,7 +39,8 @@ class FusionQueue(Protocol):
 
 
 class CloudFusion:
-    """One daemon thread fusing queued frames of any number of volumes, oldest-due first."""
+    """One daemon thread fusing queued frames of any number of volumes, those an upload
+    waits on first."""
 
     def __init__(
         self, idle_s: float = IDLE_S, max_queued_bytes: int = MAX_QUEUED_BYTES, linger_s: float = LINGER_S

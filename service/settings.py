@@ -67,12 +67,12 @@ class Settings(BaseSettings):
         default=512,
         ge=1,
         le=4096,
-        description="frames a session queues for the cloud volume (float16, 2x subsampled when that volume "
-        "cannot resolve more: 0.15 MB for 640x480 at 0.6 m); fused in the background when its uploads "
-        "pause; a full queue makes the next upload wait for room, none is dropped",
+        description="frames a session queues for the cloud volume (float16: 0.6 MB for 640x480); fused in "
+        "the background when uploads pause or by the next cloud read; a full queue makes the next upload "
+        "wait for room, none is dropped",
     )
     cloud_max_queued_mb: float = Field(
-        default=256.0,
+        default=512.0,
         gt=0,
         description="frames queued for cloud volumes, all sessions together, in MiB; beyond it an upload "
         "to a session with frames queued waits for room",
