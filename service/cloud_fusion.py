@@ -133,16 +133,21 @@ class CloudFusion:
         return None
 
     def _run(self) -> None:
-        while True:
+        try:
+            while True:
+                with self._wake:
+                    queue = self._next_due()
+                    if queue is None:
+                        self._thread = None  # still under the lock, so the next notify starts another
+                        return
+                try:
+                    queue.fuse_next()
+                except Exception:  # a bad frame must not stop the cloud of every other session
+                    logger.exception("fusing a queued frame into the cloud volume failed")
+        except BaseException:  # the next notify starts another rather than waiting on a dead one
             with self._wake:
-                queue = self._next_due()
-                if queue is None:
-                    self._thread = None  # a later frame starts another
-                    return
-            try:
-                queue.fuse_next()
-            except Exception:  # a bad frame must not stop the cloud of every other session
-                logger.exception("fusing a queued frame into the cloud volume failed")
+                self._thread = None
+            raise
 
 
 _shared: CloudFusion | None = None
