@@ -107,10 +107,10 @@ def test_worker_fuses_in_lulls_once_the_cloud_was_read():
 
 
 def test_no_fusion_while_frames_keep_arriving():
-    fusion = CloudFusion(idle_s=0.2)
+    fusion = CloudFusion(idle_s=1.0)  # far longer than a frame takes, even on a loaded machine
     scene = volume(fusion)
     scene.cloud()
-    for k in range(6):  # ~10 ms apart, well inside the lull
+    for k in range(6):  # a few ms apart
         scene.integrate(DEPTHS[k], INTRINSICS, VIEWS[k], 2.0)
         assert scene.pending == k + 1
     wait_until(lambda: scene.pending == 0)
@@ -218,13 +218,17 @@ def test_service_shutdown_stops_the_worker_and_frees_every_queue(settings: Setti
     with TestClient(create_app(settings)) as http:
         core: PlanningService = http.app.state.core
         fusion = core.sessions.cloud_fusion
-        session = http.post("/sessions", json={"intrinsics": INTRINSICS.model_dump()}).json()["session_id"]
-        assert http.get(f"/sessions/{session}/cloud").status_code == 200  # a reader: fused when idle
+        read, unread = (
+            http.post("/sessions", json={"intrinsics": INTRINSICS.model_dump()}).json()["session_id"]
+            for _ in range(2)
+        )
+        assert http.get(f"/sessions/{read}/cloud").status_code == 200  # fused by the worker when idle
         for k in range(6):
             meta = {"camera_pose": {"matrix": VIEWS[k].tolist()}, "max_depth": 2.0}
             files = {"meta": (None, str(meta).replace("'", '"')), "depth": ("d", DEPTHS[k].tobytes())}
-            assert http.post(f"/sessions/{session}/frames", files=files).status_code == 200
-        assert fusion.running and fusion.queued_bytes > 0
+            for session in (read, unread):  # the unread one keeps its frames queued
+                assert http.post(f"/sessions/{session}/frames", files=files).status_code == 200
+        assert fusion.running and fusion.queued_bytes >= 6 * DEPTHS[0].nbytes / 2
     assert not fusion.running and fusion.closed and fusion.queued_bytes == 0
     assert len(core.sessions) == 0
 
