@@ -26,8 +26,8 @@ One run measures the p50 and p95 latency (milliseconds) of
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
    own client and session), which the service micro-batches into shared forward passes;
 9. with the grpc extra (unless ``--skip-grpc``), the gRPC front end beside its HTTP twins on
-   one server serving both (``benchmarks.grpc_latency``): a frame upload, a grasp request and
-   a 60-frame stream;
+   one server serving both (``benchmarks.grpc_latency``): a frame upload, a grasp request,
+   a 60-frame and a 300-frame stream, and a cloud read right after a 60-frame stream;
 
 and checks the project's targets:
 
@@ -52,8 +52,8 @@ By default the operations run *interleaved*: each round times one call of every 
 so slow drifts of the machine (shared or throttled virtual CPUs) hit every row alike and the
 ratios stay meaningful; ``--schedule blocks`` times each operation's calls back to back
 instead. Each operation gets ``--warmup`` untimed calls first. Frame uploads keep going to one
-session per row, so every 9th of them also pays the service's deferred fusion into the fine
-(cloud) volume, as it would in real use; that shows in p95, not in p50.
+session per row; they queue their frames for the fine (cloud) volume and never fuse it (the
+service's worker would, in a lull, once a queue is a quarter full or its cloud was read).
 
 Depth frames are exact renderings of ``tests.scenes.BoxScene`` from ``circle_views()``. When
 no ``--model`` is given, random-initialised VGN weights are written to a temporary directory:
@@ -478,7 +478,7 @@ def http_grasp_operation(
     n = len(frames)
 
     def post_frame(k: int) -> None:
-        if k % 15 == 0:  # keep the session's pending cloud frames below the flush point
+        if k % 15 == 0:  # few frames queued for the cloud: the worker leaves them be
             client.reset_session(session_id)
         client.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 

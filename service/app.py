@@ -38,7 +38,8 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        if app.state.core is None:
+        owned = app.state.core is None  # a core handed in is closed by whoever built it
+        if owned:
             app.state.core = await asyncio.to_thread(PlanningService.from_settings, settings)
         service: PlanningService = app.state.core
         info = service.model_info()
@@ -51,6 +52,9 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
             sweeper.cancel()
             if grpc_server is not None:  # let calls in flight finish, briefly
                 await asyncio.to_thread(lambda: grpc_server.stop(grace=1.0).wait(2.0))
+            if owned:  # a restart of the app builds a fresh one
+                await asyncio.to_thread(service.close)
+                app.state.core = None
 
     app = FastAPI(
         title="vgn-service",

@@ -21,6 +21,7 @@ from client.schemas import (
     SessionInfo,
 )
 from service.baseline import plan_antipodal
+from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
 from service.planner import (
@@ -55,6 +56,7 @@ class PlanningService:
             settings.session_ttl_s,
             settings.cloud_resolution,
             settings.cloud_max_pending_frames,
+            cloud_fusion=CloudFusion(max_queued_bytes=int(settings.cloud_max_queued_mb * 2**20)),
         )
 
     @classmethod
@@ -67,6 +69,10 @@ class PlanningService:
             settings.inference, settings.precision, settings.batch_window_ms, settings.max_batch
         )
         return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
+
+    def close(self) -> None:
+        """Free the sessions and end the cloud worker thread (at shutdown)."""
+        self.sessions.close()
 
     # Sessions -----------------------------------------------------------------------------
     def create_session(self, spec: SessionCreate) -> SessionInfo:

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
+from service.cloud_fusion import CloudFusion, shared_fusion
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
 from service.tsdf import SceneVolume
 
@@ -75,13 +76,15 @@ class SessionStore:
         max_sessions: int,
         ttl_s: float,
         cloud_resolution: int,
-        cloud_max_pending: int = 16,
+        cloud_max_pending: int = 512,
         clock: Callable[[], float] = time.time,
+        cloud_fusion: CloudFusion | None = None,
     ) -> None:
         self.max_sessions = max_sessions
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
         self._cloud_max_pending = cloud_max_pending
+        self.cloud_fusion = cloud_fusion or shared_fusion()
         self._clock = clock
         self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()
@@ -95,6 +98,7 @@ class SessionStore:
             workspace.pose.as_matrix(),
             self._cloud_resolution,
             self._cloud_max_pending,
+            self.cloud_fusion,
         )
         with self._lock:
             self._drop_expired(now)
@@ -136,12 +140,19 @@ class SessionStore:
     def delete(self, session_id: str) -> None:
         with self._lock:
             self._live(session_id, self._clock())
-            del self._sessions[session_id]
+            self._remove(session_id)
 
     def sweep(self) -> int:
         """Drop expired sessions; returns how many went."""
         with self._lock:
             return self._drop_expired(self._clock())
+
+    def close(self) -> None:
+        """Drop every session and stop the cloud worker (the service shuts down)."""
+        with self._lock:
+            for session_id in list(self._sessions):
+                self._remove(session_id)
+        self.cloud_fusion.close()
 
     def __len__(self) -> int:
         return len(self._sessions)
@@ -152,7 +163,7 @@ class SessionStore:
         if session is None:
             raise SessionNotFound(f"session {session_id!r} does not exist (or it expired)")
         if self._expired(session, now):
-            del self._sessions[session_id]
+            self._remove(session_id)
             raise SessionNotFound(f"session {session_id!r} expired after {self.ttl_s:g} s idle")
         return session
 
@@ -162,13 +173,18 @@ class SessionStore:
     def _drop_expired(self, now: float) -> int:
         expired = [sid for sid, s in self._sessions.items() if self._expired(s, now)]
         for session_id in expired:
-            del self._sessions[session_id]
+            self._remove(session_id)
         return len(expired)
+
+    def _remove(self, session_id: str) -> None:
+        """Forget a session and free the frames it queued for its cloud (a request still
+        holding it finishes on its own copy)."""
+        self._sessions.pop(session_id).volume.close()
 
     def _evict_one(self) -> None:
         for session_id, session in self._sessions.items():  # least recently used first
             if session.users == 0:
-                del self._sessions[session_id]
+                self._remove(session_id)
                 return
         raise CapacityExceeded(
             f"the session limit ({self.max_sessions}) is reached and every session is in use; "

@@ -64,11 +64,18 @@ class Settings(BaseSettings):
         default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
     )
     cloud_max_pending_frames: int = Field(
-        default=16,
+        default=512,
         ge=1,
-        le=256,
-        description="frames kept for the cloud volume until /cloud is asked for; past this many the "
-        "upload that exceeds it fuses them (~25 ms each at 120^3)",
+        le=4096,
+        description="frames a session queues for the cloud volume (float16: 0.6 MB for 640x480); fused in "
+        "the background when uploads pause or by the next cloud read; a full queue makes the next upload "
+        "wait for room, none is dropped",
+    )
+    cloud_max_queued_mb: float = Field(
+        default=512.0,
+        gt=0,
+        description="frames queued for cloud volumes, all sessions together, in MiB; beyond it an upload "
+        "to a session with frames queued waits for room",
     )
 
     @field_validator("model", "api_key", mode="before")

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import threading
+from collections import deque
+from dataclasses import dataclass
+
 import numpy as np
 import open3d as o3d
 
 from client.geometry import invert
 from client.schemas import Intrinsics
+from service.cloud_fusion import CloudFusion, shared_fusion
 
 #: Truncation distance in voxels (docs/conventions.md).
 TRUNCATION_VOXELS = 4
@@ -94,36 +99,111 @@ class TSDFVolume:
         return points, normals
 
 
+@dataclass(frozen=True)
+class QueuedFrame:
+    """A frame waiting for the cloud volume."""
+
+    depth: np.ndarray  # float16 metres (``compact_depth``)
+    intrinsics: Intrinsics
+    camera_in_workspace: np.ndarray
+    max_depth: float
+
+    @property
+    def nbytes(self) -> int:
+        return self.depth.nbytes
+
+
+def compact_depth(depth: np.ndarray) -> np.ndarray:
+    """``depth`` as float16: half the memory of float32 (0.6 MB for 640×480) while it waits.
+
+    Its spacing is 0.5 mm at 0.5-1 m and 1 mm at 1-2 m, a fraction of the cloud volume's
+    2.5 mm voxels (the cloud moves by well under a voxel, see the tests); a value past
+    float16's range becomes inf, which fusion drops like any depth beyond ``max_depth``.
+    Every pixel is kept: subsampling where two pixels fit in a voxel halved the memory
+    again but moved edges enough to change the antipodal planner's grasps.
+    """
+    return depth.astype(np.float16)
+
+
 class SceneVolume:
     """What a session fuses: the coarse grid the network reads, and a finer volume for the
     point cloud, both in the workspace whose corner sits at ``workspace_pose`` in the world.
 
-    The fine volume (120³) costs ~15x the coarse one to integrate (~25 ms a frame here) and
-    only cloud readers need it, so frames are queued and fused into it when a cloud is asked
-    for, which keeps frame uploads at the coarse volume's cost. Past ``max_pending`` queued
-    frames (memory: 1.2 MB each at 640×480) the upload that overflows fuses them.
+    The fine volume (120³) costs ~15-25x the coarse one to integrate (~25 ms a frame) and
+    only cloud readers need it, so an upload fuses the coarse volume and queues a compact copy
+    of the frame (``compact_depth``), never fusing the fine one. The shared ``CloudFusion``
+    worker fuses the queue in lulls between uploads once the session's cloud has been read or
+    its queue is a quarter full; a cloud read fuses what is left. Memory stays bounded: at
+    ``max_pending`` queued frames, or with the process's queues over their byte budget, an
+    upload waits for the worker to make room. No frame is dropped.
+
+    Locks: the caller holds the session's lock for ``integrate``, ``reset``, ``grid`` and
+    ``cloud``; the worker takes none of the session's. ``_lock`` guards the queue and which
+    fine volume is current (short holds); ``_fusing`` is held while integrating into the fine
+    volume, so that a cloud read waits for the worker's frame in flight. A reset swaps in a
+    new queue and volume: a frame the worker was fusing lands in the discarded volume.
     """
 
     def __init__(self, size: float, resolution: int, workspace_pose: np.ndarray, cloud_resolution: int,
-                 max_pending: int = 16):  # fmt: skip
+                 max_pending: int = 512, fusion: CloudFusion | None = None):  # fmt: skip
         self.max_pending = max_pending
         self.workspace_pose = np.asarray(workspace_pose, dtype=np.float64)
         self._world_to_workspace = invert(self.workspace_pose)
         self._size, self._resolution, self._cloud_resolution = size, resolution, cloud_resolution
-        self.reset()
+        self._fusion = fusion or shared_fusion()
+        self._lock = threading.Lock()
+        self._room = threading.Condition(self._lock)  # an upload waits here for queue space
+        self._fusing = threading.Lock()
+        self._pending: deque[QueuedFrame] = deque()
+        self._fine: TSDFVolume | None = None
+        self._cloud_read = False  # then the worker keeps its volume fused in the background
+        self._draining = False  # a quarter full: fused to the end in lulls, read or not
+        self._waiting = 0
+        self._closed = False
+        self.coarse = TSDFVolume(size, resolution)
+
+    @property
+    def pending(self) -> int:
+        """Frames queued for the cloud volume."""
+        return len(self._pending)
 
     def reset(self) -> None:
-        self.coarse = TSDFVolume(self._size, self._resolution)
-        self._fine: TSDFVolume | None = None
-        self._pending: list[tuple[np.ndarray, Intrinsics, np.ndarray, float]] = []
+        with self._lock:
+            self.coarse = TSDFVolume(self._size, self._resolution)
+            self._fine = None
+            self._drop_pending()
+
+    def close(self) -> None:
+        """The session is gone: free the queue and take no more frames for the cloud (an
+        upload waiting for room returns)."""
+        with self._lock:
+            self._closed = True
+            self._drop_pending()
+        self._fusion.forget(self)
 
     def integrate(self, depth: np.ndarray, intrinsics: Intrinsics, camera_pose: np.ndarray, max_depth: float):
         """Fuse a depth image (metres) taken from ``camera_pose`` (camera → world)."""
         camera_in_workspace = self._world_to_workspace @ camera_pose
+        # Everything that could fail runs before the first volume changes.
+        frame = QueuedFrame(compact_depth(depth), intrinsics, camera_in_workspace, max_depth)
         self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
-        self._pending.append((depth, intrinsics, camera_in_workspace, max_depth))
-        if len(self._pending) > self.max_pending:
-            self._flush_fine()
+        while True:
+            with self._lock:
+                if self._closed or self._fusion.closed:  # the session or the service is gone
+                    return
+                if not (self._pending and self._full()):
+                    self._pending.append(frame)
+                    self._fusion.account(frame.nbytes)
+                    break
+                self._waiting += 1  # makes the queue due for the worker at once
+            self._fusion.notify(self)  # never with _lock held: the worker takes its lock first
+            with self._lock:
+                try:
+                    if not (self._closed or self._fusion.closed) and self._pending and self._full():
+                        self._room.wait()
+                finally:
+                    self._waiting -= 1
+        self._fusion.notify(self, frame=True)
 
     def grid(self) -> np.ndarray:
         """The network input, (N, N, N) float32 in the workspace frame (see ``TSDFVolume.grid``)."""
@@ -131,17 +211,56 @@ class SceneVolume:
 
     def cloud(self) -> np.ndarray:
         """(M, 6) float32 points and unit normals of the fused surface in the *world* frame."""
-        self._flush_fine()
-        assert self._fine is not None
-        points, normals = self._fine.surface_cloud()
+        self._cloud_read = True
+        with self._fusing:
+            while self._fuse_oldest():
+                pass
+            if self._fine is None:
+                return np.zeros((0, 6), dtype=np.float32)
+            points, normals = self._fine.surface_cloud()
         rotation, translation = self.workspace_pose[:3, :3], self.workspace_pose[:3, 3]
         world_points = points @ rotation.T + translation
         world_normals = normals @ rotation.T
         return np.hstack([world_points, world_normals]).astype(np.float32)
 
-    def _flush_fine(self) -> None:
-        if self._fine is None:
-            self._fine = TSDFVolume(self._size, self._cloud_resolution)
-        for depth, intrinsics, camera_in_workspace, max_depth in self._pending:
-            self._fine.integrate(depth, intrinsics, camera_in_workspace, max_depth)
-        self._pending.clear()
+    # For the worker (service.cloud_fusion.FusionQueue) -----------------------------------------
+    def fusion_wanted(self) -> tuple[bool, bool]:
+        with self._lock:
+            if not self._pending:
+                self._draining = False
+                return False, False
+            self._draining = self._draining or len(self._pending) * 4 >= self.max_pending
+            return self._cloud_read or self._draining, self._waiting > 0
+
+    def fuse_next(self) -> bool:
+        with self._fusing:
+            return self._fuse_oldest()
+
+    # Helpers -------------------------------------------------------------------------------------
+    def _full(self) -> bool:
+        return len(self._pending) >= self.max_pending or self._fusion.over_budget()
+
+    def _fuse_oldest(self) -> bool:
+        """Fuse the oldest queued frame and only then dequeue it (a reader holding ``_fusing``
+        never sees a frame neither queued nor fused); call with ``_fusing`` held."""
+        with self._lock:
+            if not self._pending:
+                return False
+            frame = self._pending[0]
+            if self._fine is None:
+                self._fine = TSDFVolume(self._size, self._cloud_resolution)
+            fine = self._fine
+        try:
+            fine.integrate(frame.depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
+        finally:  # a frame Open3D refuses is dropped rather than retried forever
+            with self._lock:
+                if self._fine is fine and self._pending and self._pending[0] is frame:  # else reset
+                    self._pending.popleft()
+                    self._fusion.account(-frame.nbytes)
+                    self._room.notify_all()
+        return True
+
+    def _drop_pending(self) -> None:
+        dropped, self._pending = self._pending, deque()
+        self._fusion.account(-sum(frame.nbytes for frame in dropped))
+        self._room.notify_all()

@@ -45,8 +45,10 @@ def settings(random_checkpoint: Path) -> Settings:
 
 
 @pytest.fixture
-def core(settings: Settings) -> PlanningService:
-    return PlanningService.from_settings(settings)
+def core(settings: Settings) -> Iterator[PlanningService]:
+    service = PlanningService.from_settings(settings)
+    yield service
+    service.close()
 
 
 @pytest.fixture

@@ -157,6 +157,7 @@ def test_rejected_frames_are_invalid_argument_and_change_nothing(clients, stub):
         assert needle in error.details(), (needle, error.details())
     assert rpc.session(session_id).frame_count == 1
     np.testing.assert_array_equal(rpc.tsdf(session_id), before)
+    np.testing.assert_allclose(rpc.cloud(session_id), cloud_of([0]), atol=1e-5)  # nor the cloud volume
     with pytest.raises(BadRequest, match="INVALID_ARGUMENT"):
         rpc.add_frame(session_id, DEPTHS[1][:100], POSES[1])
 
@@ -269,6 +270,23 @@ def test_a_stream_of_100_frames_fuses_them_all(clients):
     np.testing.assert_allclose(http.tsdf(session_id), reference.grid(), atol=1e-5)
 
 
+def test_the_cloud_right_after_a_stream_holds_every_frame(clients):
+    """The stream only queues frames for the cloud volume; reading the cloud fuses them all."""
+    _, rpc = clients
+    session_id = rpc.create_session(intrinsics=INTRINSICS).session_id
+    order = [i % 6 for i in range(40)]
+    rpc.stream_frames(session_id, [(DEPTHS[i], POSES[i]) for i in order])
+    np.testing.assert_allclose(rpc.cloud(session_id), cloud_of(order), atol=1e-5)
+
+
+def cloud_of(indices: list[int]) -> np.ndarray:
+    """The service's cloud of these frames, fused here in process."""
+    volume = SceneVolume(0.3, 40, np.eye(4), cloud_resolution=120, max_pending=len(indices))
+    for i in indices:
+        volume.integrate(DEPTHS[i], INTRINSICS, POSES[i], 2.0)
+    return volume.cloud()
+
+
 def test_a_bad_frame_ends_the_stream_naming_it(clients):
     _, rpc = clients
     session_id = rpc.create_session(intrinsics=INTRINSICS).session_id
@@ -276,6 +294,7 @@ def test_a_bad_frame_ends_the_stream_naming_it(clients):
     with pytest.raises(BadRequest, match="frame 2: raw depth must be"):
         rpc.stream_frames(session_id, frames)
     assert rpc.session(session_id).frame_count == 2
+    np.testing.assert_allclose(rpc.cloud(session_id), cloud_of([0, 1]), atol=1e-5)  # the frames taken
     with pytest.raises(ValueError, match="2-D"):  # raised here while encoding, not a bare CANCELLED
         rpc.stream_frames(session_id, [(DEPTHS[0], POSES[0]), (DEPTHS[0][None], POSES[0])])
 

@@ -125,20 +125,3 @@ def test_frame_size_can_change_between_frames():
     cloud = volume.cloud()
     assert len(cloud) > 500, "both frames put the surface where it is"
     assert np.percentile(SCENE.distance_to_surface(cloud[:, :3].astype(np.float64)), 95) < 0.003
-
-
-def test_cloud_volume_is_fused_only_on_demand_and_bounded():
-    """Frames wait for the cloud volume until a cloud is asked for, at most ``max_pending``."""
-    volume = SceneVolume(0.3, 40, np.eye(4), cloud_resolution=80, max_pending=3)
-    views = circle_views(5)
-    for pose in views[:3]:
-        volume.integrate(SCENE.depth(pose), INTRINSICS, pose, 2.0)
-    assert len(volume._pending) == 3 and volume._fine is None
-    volume.integrate(SCENE.depth(views[3]), INTRINSICS, views[3], 2.0)  # overflows: fused now
-    assert not volume._pending and volume._fine is not None
-    volume.integrate(SCENE.depth(views[4]), INTRINSICS, views[4], 2.0)
-    bounded = volume.cloud()
-    reference = SceneVolume(0.3, 40, np.eye(4), cloud_resolution=80, max_pending=16)
-    for pose in views:
-        reference.integrate(SCENE.depth(pose), INTRINSICS, pose, 2.0)
-    np.testing.assert_allclose(bounded, reference.cloud(), atol=1e-6)
