@@ -3,6 +3,7 @@ it carries a card that belongs to it, and it clears a simulated table out of the
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -62,8 +63,23 @@ def test_the_packaged_card_belongs_to_the_weights_and_says_how_to_rebuild_them()
     assert 0.0 < card["threshold"] <= 1.0
     assert card["command"].startswith("vgn-train ")
     steps = "\n".join(card["reproduce"])
-    for step in ("object_split", "generate-data", "clean-data", "vgn-train"):
+    for step in ("object_split", "generate-data", "vgn-pack-data", "vgn-train"):
         assert step in steps, f"the card's reproduce steps lack {step}"
+    shards = [shard for data in card["packed_data"] for shard in data["shards"]]
+    assert shards and all(len(shard["sha256"]) == 64 for shard in shards), "the card names its shards by hash"
+    assert card["history"][-1]["steps"] > 0, "the card counts the optimizer steps"
+    assert card["executed_grasps"]["rounds"] > 0, "the card says how the model grasped held-out objects"
+
+
+def test_the_shards_the_packaged_model_learned_from_are_in_the_repository():
+    """The training data accumulates in ``data/``: every shard the card names is there, unchanged."""
+    card = json.loads(card_path(PACKAGED_MODEL).read_text())
+    repository = PACKAGED_MODEL.parents[2]
+    for data in card["packed_data"]:
+        for shard in data["shards"]:
+            path = repository / data["folder"] / shard["file"]
+            assert path.is_file(), f"{path} is missing"
+            assert hashlib.sha256(path.read_bytes()).hexdigest() == shard["sha256"], f"{path} changed"
 
 
 def test_clear_scene_out_of_the_box(tmp_path: Path, monkeypatch):
