@@ -23,7 +23,7 @@ if [ ${#missing[@]} -gt 0 ]; then
   fi
 fi
 
-# Headless Chromium for the viewer's browser test (tests/test_viewer.py fails without it).
+# Headless Chromium for the viewer's browser test (tests/service/test_viewer.py fails without it).
 if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
   if command -v apt-get >/dev/null 2>&1; then
     sudo=""

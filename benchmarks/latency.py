@@ -55,7 +55,7 @@ instead. Each operation gets ``--warmup`` untimed calls first. Frame uploads kee
 session per row; they queue their frames for the fine (cloud) volume and never fuse it (the
 service's worker would, in a lull, once a queue is a quarter full or its cloud was read).
 
-Depth frames are exact renderings of ``tests.scenes.BoxScene`` from ``circle_views()``. When
+Depth frames are exact renderings of ``tests.helpers.scenes.BoxScene`` from ``circle_views()``. When
 no ``--model`` is given, random-initialised VGN weights are written to a temporary directory:
 the network's cost does not depend on its weights, but the *number of grasps* does, and with
 it part of detection and the size of the response (random weights rarely reach quality 0.9,
@@ -102,7 +102,7 @@ from service.vgn.checkpoint import load_vgn, save_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import VGN
-from tests.scenes import INTRINSICS, BoxScene, circle_views
+from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 warnings.filterwarnings("ignore", category=DeprecationWarning)
 

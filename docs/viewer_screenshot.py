@@ -22,7 +22,7 @@ from sim_worker.camera import SIM_INTRINSICS, Camera, six_views
 from sim_worker.objects import object_set
 from sim_worker.scenes import generate_scene
 from sim_worker.world import World
-from tests.browser import headless_chromium
+from tests.helpers.browser import headless_chromium
 
 
 def main() -> None:

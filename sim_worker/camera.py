@@ -41,7 +41,7 @@ _OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
 _BACKGROUND_Z = 1.0 - 1e-6
 
 #: Where each rasteriser samples pixel (column u, row v), relative to the pixel's centre, in
-#: pixels (x right, y down), measured by fitting rendered planes (tests/test_sim_camera.py).
+#: pixels (x right, y down), measured by fitting rendered planes (tests/sim_worker/test_sim_camera.py).
 #: OpenGL samples pixel centres; PyBullet's TinyRenderer samples pixel corners (integer
 #: window coordinates, y up), i.e. half a pixel left of and below the centre.
 OPENGL_SAMPLE_OFFSET = (0.0, 0.0)

@@ -1,4 +1,10 @@
-"""Shared fixtures: a random-initialised checkpoint, the app in-process, and a real uvicorn."""
+"""Shared fixtures: a random-initialised checkpoint, the app in-process, and a real uvicorn.
+
+Shared helper code lives in ``tests/helpers/``. Each folder of tests is a package (it has an
+``__init__.py``), so pytest imports ``tests/service/test_x.py`` as ``tests.service.test_x`` and
+test files in different folders may share a basename; ``pytest_configure`` refuses a folder
+that lacks one.
+"""
 
 from __future__ import annotations
 
@@ -23,6 +29,20 @@ from service.vgn.network import VGN
 os.environ["VGN_GRPC_PORT"] = "0"
 warnings.filterwarnings("ignore", message=".*httpx2.*")
 from fastapi.testclient import TestClient  # noqa: E402
+
+TESTS = Path(__file__).resolve().parent
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Without ``__init__.py`` pytest would import a folder's tests by basename, and two
+    ``test_x.py`` in different folders would clash."""
+    missing = sorted(
+        str(folder.relative_to(TESTS.parent))
+        for folder in {parent for test in TESTS.rglob("test_*.py") for parent in test.parents}
+        if folder.is_relative_to(TESTS) and not (folder / "__init__.py").is_file()
+    )
+    if missing:
+        raise pytest.UsageError(f"test folders without __init__.py: {', '.join(missing)}")
 
 
 @pytest.fixture(scope="session")

@@ -1,5 +1,6 @@
 """Record the network inputs of a few simulated cluttered scenes for the fast-inference
-agreement test (``tests/test_fast_inference.py``).
+agreement test (``tests/service/test_fast_inference.py``) and the batching test, which
+read them through ``tests/helpers/grids.py``.
 
     PYTHONPATH=. python -m tests.data.record_grids --out tests/data/recorded_grids.npz
 

@@ -1,0 +1,44 @@
+"""Clear-scene runs as a user starts them (``vgn-client clear-scene --sim``), and the checks
+every finished run's results folder must pass."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+
+def read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+def check_results(results: Path, rounds: int) -> dict:
+    summary = json.loads((results / "summary.json").read_text())
+    round_rows = read_csv(results / "rounds.csv")
+    grasp_rows = read_csv(results / "grasps.csv")
+    assert len(round_rows) == summary["rounds"] == rounds
+    assert len(grasp_rows) == summary["attempts"] == sum(int(r["attempts"]) for r in round_rows)
+    assert summary["successes"] == sum(int(g["label"]) for g in grasp_rows)
+    outcomes = summary["outcomes"]
+    assert sum(outcomes.values()) == summary["attempts"], "every attempt falls in one outcome class"
+    assert outcomes["success"] == summary["successes"]
+    for g in grasp_rows:  # a contact stop names what it touched and how far before the grasp pose
+        assert bool(g["contact"]) == (g["contact_distance"] != "")
+        if g["outcome"] == "approach_contact":
+            assert g["contact"] and 0 <= float(g["contact_distance"]) <= 0.05
+    for r in round_rows:  # each round ends: table clear, no grasp found, or 2 failures in a row
+        labels = [int(g["label"]) for g in grasp_rows if g["round_id"] == r["round_id"]]
+        assert "0,0" not in ",".join(map(str, labels[:-1])), "no attempt after two failures in a row"
+        assert int(r["cleared"]) <= int(r["object_count"])
+    for g in grasp_rows:
+        assert float(g["planning_time"]) > 0 and float(g["client_planning_time"]) >= float(g["planning_time"])
+        assert float(g["integration_time"]) > 0
+    return summary
+
+
+def clear_scene(*args: str) -> subprocess.CompletedProcess:
+    command = [sys.executable, "-m", "client.cli", "clear-scene", "--sim", "--renderer", "tiny", *args]
+    return subprocess.run(command, capture_output=True, text=True, timeout=600)

@@ -1,0 +1,101 @@
+"""The antipodal baseline planner on the analytic box scene, in process and over HTTP."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from client.schemas import GraspQuery, SessionCreate
+from service.app import create_app
+from service.baseline import AntipodalConfig, plan_antipodal
+from service.core import PlanningService
+from service.settings import Settings
+from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+
+SCENE = BoxScene()  # 0.08 (x) x 0.06 (y) x 0.06 (z) on the table
+FINGER_DEPTH = 0.05
+
+
+def fused_session(core: PlanningService, views: int = 6) -> str:
+    session_id = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    for pose in circle_views(views):
+        core.add_frame(session_id, SCENE.depth(pose), pose)
+    return session_id
+
+
+@pytest.fixture
+def antipodal(core: PlanningService):
+    session_id = fused_session(core)
+    return core.plan(session_id, GraspQuery(planner="antipodal", threshold=0.0))
+
+
+def test_grasps_fit_the_box(antipodal):
+    assert antipodal.model == "antipodal" and antipodal.frame_count == 6 and antipodal.planning_ms > 0
+    grasps = antipodal.grasps
+    assert len(grasps) >= 3
+    qualities = [g.quality for g in grasps]
+    assert qualities == sorted(qualities, reverse=True) and all(0.0 <= q <= 1.0 for q in qualities)
+    lower, upper = np.asarray(SCENE.lower) - 0.02, np.asarray(SCENE.upper) + 0.02
+    for grasp in grasps:
+        matrix = grasp.as_matrix()
+        np.testing.assert_allclose(matrix[:3, 2], grasp.approach, atol=1e-6)
+        middle = np.asarray(grasp.position) + 0.5 * FINGER_DEPTH * matrix[:3, 2]  # of the closing region
+        assert np.all(middle >= lower) and np.all(middle <= upper)
+        # across the 6 cm side (+ the planner's 2 mm margin); the 8 cm side is too wide
+        assert grasp.width == pytest.approx(0.062, abs=0.005)
+        tip = np.asarray(grasp.position) + FINGER_DEPTH * matrix[:3, 2]
+        assert tip[2] > TABLE_Z
+        assert abs(matrix[1, 1]) > 0.9  # closing along world y
+
+
+def test_best_grasp_is_top_down_across_the_narrow_side(antipodal):
+    best = antipodal.grasps[0]
+    matrix = best.as_matrix()
+    assert best.approach[2] < -0.95 and best.quality > 0.9
+    assert abs(matrix[1, 1]) > 0.95
+    tip = np.asarray(best.position) + FINGER_DEPTH * matrix[:3, 2]
+    assert TABLE_Z < tip[2] < SCENE.upper[2] - 0.03  # deep on the box, clear of the table
+
+
+def test_reproducible_and_filtered(core):
+    session_id = fused_session(core)
+    query = GraspQuery(planner="antipodal", threshold=0.0)
+    first, second = core.plan(session_id, query), core.plan(session_id, query)
+    assert first.grasps == second.grasps
+    top = core.plan(session_id, GraspQuery(planner="antipodal", threshold=0.0, max_grasps=2))
+    assert top.grasps == first.grasps[:2]
+    cone = core.plan(
+        session_id,
+        GraspQuery(planner="antipodal", threshold=0.0, approach="0,0,-1", max_approach_angle=10.0),
+    )
+    assert cone.grasps and all(g.approach[2] < -np.cos(np.radians(10.0)) for g in cone.grasps)
+    cropped = core.plan(
+        session_id, GraspQuery(planner="antipodal", threshold=0.0, crop_min="0,0,0", crop_max="0.15,0.3,0.3")
+    )
+    assert cropped.grasps and all(g.position[0] <= 0.15 for g in cropped.grasps)
+    high = core.plan(session_id, GraspQuery(planner="antipodal", threshold=0.9))
+    assert high.grasps and all(g.quality >= 0.9 for g in high.grasps), "a box has grasps scoring 0.9"
+
+
+def test_empty_inputs_give_no_grasps(core):
+    session_id = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    result = core.plan(session_id, GraspQuery(planner="antipodal", threshold=0.0))
+    assert result.grasps == [] and result.frame_count == 0
+    assert plan_antipodal(np.zeros((0, 6), np.float32), np.eye(4), AntipodalConfig()) == []
+
+
+def test_antipodal_over_http_needs_no_model():
+    core = PlanningService.from_settings(Settings(model="none", api_key=None))  # VGN_MODEL=none
+    with TestClient(create_app(core=core)) as http:
+        session_id = http.post("/sessions", json={"intrinsics": INTRINSICS.model_dump()}).json()["session_id"]
+        for pose in circle_views(6):
+            core.add_frame(session_id, SCENE.depth(pose), pose)
+        assert http.get(f"/sessions/{session_id}/grasps").status_code == 503  # VGN needs a model
+        response = http.get(
+            f"/sessions/{session_id}/grasps", params={"planner": "antipodal", "threshold": 0.5}
+        )
+        assert response.status_code == 200, response.text
+        body = response.json()
+        assert body["model"] == "antipodal" and body["grasps"]
+        assert http.get(f"/sessions/{session_id}/grasps", params={"planner": "magic"}).status_code == 422

@@ -1,0 +1,106 @@
+"""Micro-batching: concurrent grasp requests share one forward pass and get the answers
+they would have got alone. This is the path a GPU takes (``VGN_DEVICE=cuda``); only the
+device differs, so it is tested here on the CPU."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import httpx
+import numpy as np
+import pytest
+
+from client.connect import connect
+from client.embedded import EmbeddedService
+from client.http import VGNClient
+from service.planner import GraspPlanner, InferenceOptions
+from service.settings import PACKAGED_MODEL
+from service.vgn.batching import MicroBatcher
+from tests.helpers.grids import recorded_grids
+from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+
+SESSIONS = 6
+
+
+def test_concurrent_grids_run_as_one_batch_with_the_unbatched_results():
+    options = InferenceOptions(precision="fp32", batch_window_ms=200.0)
+    planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", options)
+    grids = [grid for _, grid in recorded_grids()]
+    alone = [planner.infer(grid) for grid in grids]
+    before = planner.runtime()["batches"]
+    start = threading.Barrier(len(grids))
+
+    def ask(grid: np.ndarray):
+        start.wait()
+        return planner.infer(grid)
+
+    with ThreadPoolExecutor(len(grids)) as pool:
+        together = list(pool.map(ask, grids))
+    after = planner.runtime()["batches"]
+    assert after["batches"] - before["batches"] < len(grids), "concurrent requests shared forward passes"
+    assert after["largest"] > 1
+    for single, batched in zip(alone, together, strict=True):
+        for name in ("quality", "rotation", "width"):
+            np.testing.assert_allclose(getattr(batched, name), getattr(single, name), atol=1e-5, rtol=1e-5)
+
+
+def test_a_failing_forward_reaches_every_waiting_request_and_the_batcher_goes_on():
+    calls = []
+
+    def forward(grids: np.ndarray) -> list:
+        calls.append(len(grids))
+        if grids[0, 0, 0, 0] < 0:
+            raise ValueError("bad grid")
+        return [float(g.sum()) for g in grids]
+
+    batcher = MicroBatcher(forward)
+    with pytest.raises(ValueError, match="bad grid"):
+        batcher.run(-np.ones((2, 2, 2), np.float32))
+    assert batcher.run(np.ones((2, 2, 2), np.float32)) == 8.0
+    # Grids of different sizes never share a batch.
+    assert batcher.run(np.ones((4, 4, 4), np.float32)) == 64.0
+
+
+def test_sessions_asking_at_once_over_http_and_grpc_share_forward_passes():
+    """Several sessions of a real server request grasps at the same moment, first over HTTP,
+    then over gRPC; with a batching window each burst is answered from shared forward passes,
+    with the grasps each session gets alone: both front ends plan through the same batcher."""
+    # Without reuse: the repeated requests on unchanged sessions must each run the network.
+    env = {
+        "VGN_API_KEY": "",
+        "VGN_BATCH_WINDOW_MS": "300",
+        "VGN_PRECISION": "fp32",
+        "VGN_REUSE_OUTPUT": "false",
+    }
+    scene = BoxScene()
+    views = [(scene.depth(pose), pose) for pose in circle_views(3)]
+    with EmbeddedService(model=PACKAGED_MODEL, env=env, grpc=True) as service, VGNClient(service.url) as vgn:
+        sessions = []
+        for _ in range(SESSIONS):
+            session_id = vgn.create_session(intrinsics=INTRINSICS).session_id
+            for depth, pose in views:
+                vgn.add_frame(session_id, depth, pose)
+            sessions.append(session_id)
+        alone = [vgn.grasps(s, threshold=0.5).grasps for s in sessions]
+        assert alone[0], "the box offers grasps"
+        for url in (service.url, service.grpc_url):
+            before = vgn.model().runtime["batches"]
+            start = threading.Barrier(SESSIONS)
+
+            def ask(session_id: str, url: str = url, start: threading.Barrier = start):
+                with connect(url) as own:
+                    start.wait()
+                    return own.grasps(session_id, threshold=0.5).grasps
+
+            with ThreadPoolExecutor(SESSIONS) as pool:
+                together = list(pool.map(ask, sessions))
+            after = httpx.get(f"{service.url}/model").json()["runtime"]["batches"]
+            for batched, single in zip(together, alone, strict=True):  # equal up to float rounding
+                assert [g.position for g in batched] == [g.position for g in single], url
+                assert np.allclose([g.quality for g in batched], [g.quality for g in single], atol=1e-5)
+                assert np.allclose(
+                    [g.orientation for g in batched], [g.orientation for g in single], atol=1e-5
+                )
+            assert after["batches"] - before["batches"] < SESSIONS, url
+            assert after["largest"] > 1, url

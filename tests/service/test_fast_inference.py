@@ -1,0 +1,88 @@
+"""The fast inference path gives the grasps of VGN as trained: folded weights, fused heads
+and bfloat16 are checked against the float32 eager network on recorded cluttered scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from service.planner import GraspPlanner, InferenceOptions, native_bf16
+from service.settings import PACKAGED_MODEL
+from service.vgn.agreement import Tolerance, disagreements
+from service.vgn.checkpoint import load_vgn
+from service.vgn.detection import DetectionConfig, detect_grasps
+from service.vgn.fast import FastVGN, polyphase_weights
+from service.vgn.network import VGN
+from tests.helpers.grids import recorded_grids
+
+VOXEL = 0.3 / 40
+#: Low enough that every recorded scene has at least 10 grasps to compare.
+THRESHOLD = 0.3
+
+
+def grasps_of(network: torch.nn.Module, grid: np.ndarray):
+    with torch.inference_mode():
+        quality, rotation, width = network(torch.from_numpy(grid)[None, None])
+    config = DetectionConfig(threshold=THRESHOLD)
+    return detect_grasps(
+        grid, quality[0, 0].numpy(), rotation[0].numpy(), width[0, 0].numpy(), VOXEL, np.eye(4), config
+    )
+
+
+def test_a_folded_convolution_equals_convolving_the_upsampled_input():
+    torch.manual_seed(0)
+    for kernel in (3, 5):
+        conv = torch.nn.Conv3d(3, 2, kernel, padding=kernel // 2).double()
+        x = torch.rand(1, 3, 4, 5, 6, dtype=torch.float64)
+        expected = conv(torch.nn.functional.interpolate(x, scale_factor=2))
+        weight, bias = polyphase_weights(conv.weight, conv.bias)
+        from service.vgn.fast import pixel_shuffle_3d
+
+        folded = pixel_shuffle_3d(torch.nn.functional.conv3d(x, weight, bias, padding=1))
+        assert torch.allclose(folded, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("resolution", [40, 48])
+def test_fast_float32_matches_the_network_voxel_for_voxel(resolution):
+    torch.manual_seed(3)
+    network = VGN().eval()
+    fast = FastVGN.from_vgn(network)
+    grid = torch.rand(2, 1, resolution, resolution, resolution)
+    with torch.inference_mode():
+        for expected, actual in zip(network(grid), fast(grid), strict=True):
+            assert actual.shape == expected.shape
+            assert torch.allclose(actual, expected, atol=1e-4)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16], ids=["fp32", "bf16"])
+def test_fast_top10_grasps_agree_with_the_reference_on_recorded_scenes(dtype):
+    if dtype == torch.bfloat16 and not native_bf16(torch.device("cpu")):
+        pytest.skip("this CPU has no native bfloat16; the service uses float32 here")
+    reference = load_vgn(PACKAGED_MODEL)
+    fast = FastVGN.from_vgn(reference, dtype)
+    tolerance = Tolerance(position_m=VOXEL, angle_deg=5.0, quality=0.02)
+    for name, grid in recorded_grids():
+        expected, actual = grasps_of(reference, grid), grasps_of(fast, grid)
+        assert len(expected) >= 10, f"{name}: the recorded scene should offer 10 grasps to compare"
+        assert disagreements(expected, actual, tolerance) == [], name
+
+
+def test_the_agreement_check_notices_a_different_network():
+    """The check above can fail: weights of another network disagree on the same scenes."""
+    reference = load_vgn(PACKAGED_MODEL)
+    other = load_vgn(PACKAGED_MODEL)
+    with torch.no_grad():
+        other.conv_qual.bias.add_(0.3)  # a slightly different quality head
+    tolerance = Tolerance(position_m=VOXEL)
+    name, grid = recorded_grids()[0]
+    assert disagreements(grasps_of(reference, grid), grasps_of(FastVGN.from_vgn(other), grid), tolerance)
+
+
+def test_the_planner_runs_the_fast_form_by_default_and_the_reference_on_request():
+    fast = GraspPlanner.from_path(PACKAGED_MODEL, "cpu")
+    reference = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(form="reference"))
+    assert fast.runtime()["inference"] == "fast" and reference.runtime()["precision"] == "float32"
+    _, grid = recorded_grids()[1]
+    a, b = fast.infer(grid), reference.infer(grid)
+    assert np.abs(a.quality - b.quality).max() < 0.02

@@ -1,0 +1,158 @@
+"""Clutter removal: results files, resume, metrics, and short runs through a real service."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
+from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
+from tests.helpers.runs import check_results, clear_scene, read_csv
+
+VGN_COLUMNS = ["round_id", "scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "score", "label",
+               "integration_time", "planning_time"]  # fmt: skip
+
+
+def record(round_id: int, labels: list[int], objects: int = 5) -> RoundRecord:
+    rows = [{"round_id": round_id, "scene_id": f"s{round_id}", "label": label, "planning_time": 10.0}
+            for label in labels]  # fmt: skip
+    return RoundRecord(round_id, f"s{round_id}", objects, cleared=sum(labels), attempts=len(labels),
+                       successes=sum(labels), seconds=1.0, grasps=rows)  # fmt: skip
+
+
+def test_grasps_csv_starts_with_vgn_columns():
+    assert GRASP_COLUMNS[: len(VGN_COLUMNS)] == VGN_COLUMNS
+
+
+def test_rounds_commit_atomically_and_resume(tmp_path: Path):
+    config = {"scene": "blocks", "rounds": 3, "seed": 1}
+    folder = ResultsFolder(tmp_path, config)
+    folder.commit(record(0, [1, 0, 1]))
+    # An interrupted round 1 left grasp rows but no round row: they must not count.
+    with (tmp_path / "grasps.csv").open("a") as stream:
+        stream.write("1,s1,0,0,0,1,0.1,0.1,0.1,0.05,0.95,1,1.0,10.0,,,,\n")
+    resumed = ResultsFolder(tmp_path, {**config, "rounds": 5})  # more rounds may be asked for
+    assert resumed.finished_rounds() == {0}
+    assert [row["round_id"] for row in resumed.grasps] == ["0", "0", "0"]
+    resumed.commit(record(1, [0, 0]))
+    assert [row["round_id"] for row in read_csv(tmp_path / "rounds.csv")] == ["0", "1"]
+    assert len(read_csv(tmp_path / "grasps.csv")) == 5
+    assert not list(tmp_path.glob(".*.tmp")), "no temporary files left behind"
+
+
+def test_resume_with_other_settings_is_refused(tmp_path: Path):
+    ResultsFolder(tmp_path, {"scene": "blocks", "seed": 1, "rounds": 1})
+    with pytest.raises(ValueError, match="seed"):
+        ResultsFolder(tmp_path, {"scene": "blocks", "seed": 2, "rounds": 1})
+
+
+def test_metrics_follow_the_paper():
+    rounds = [{"object_count": 5, "cleared": 4, "attempts": 5, "successes": 4, "seconds": 2.0},
+              {"object_count": 5, "cleared": 1, "attempts": 3, "successes": 1, "seconds": 4.0}]  # fmt: skip
+    grasps = [
+        {"planning_time": t, "integration_time": 5.0, "client_planning_time": t + 1} for t in (10, 20, 30)
+    ]
+    summary = summarize(rounds, grasps)
+    assert summary["success_rate"] == pytest.approx(62.5)  # 5 successes / 8 attempts
+    assert summary["percent_cleared"] == pytest.approx(50.0)  # 5 removed / 10 placed
+    assert summary["planning_ms"] == {"mean": 20.0, "p50": 20.0}
+    low, high = summary["success_rate_ci95"]
+    assert low < 62.5 < high
+
+
+def test_outcomes_are_counted_by_failure_class():
+    grasps = [{"outcome": o} for o in
+              ["success", "approach_contact", "approach_contact", "nothing_held", "slipped", "pregrasp_collision"]]  # fmt: skip
+    counts = summarize([], grasps)["outcomes"]
+    assert counts == {"success": 1, "approach_contact": 2, "nothing_held": 1, "slipped": 1, "collision": 1}
+    assert failure_breakdown({"outcomes": counts}) == (
+        "approach contact 2, nothing held 1, slipped 1, collision 1"
+    )
+
+
+def test_wilson_interval_known_values():
+    assert wilson_interval(0, 0) == (0.0, 0.0)
+    assert wilson_interval(50, 100) == (40.4, 59.6)
+    low, high = wilson_interval(10, 10)
+    assert high == 100.0 and 69 < low < 73
+
+
+def test_short_run_through_a_real_service_and_resume(server, tmp_path: Path):
+    results = tmp_path / "run"
+    common = ["--url", server.url, "--object-count", "3", "--threshold", "0.5", "--results", str(results)]
+    first = clear_scene(*common, "--rounds", "1")
+    assert first.returncode == 0, first.stderr
+    assert "success rate" in first.stdout and "percent cleared" in first.stdout
+    check_results(results, 1)
+    rounds_before = (results / "rounds.csv").read_text()
+    second = clear_scene(*common, "--rounds", "2")
+    assert second.returncode == 0, second.stderr
+    assert "1 of 2 rounds already done" in second.stderr
+    check_results(results, 2)
+    assert (results / "rounds.csv").read_text().startswith(rounds_before), "round 0 was kept, not rerun"
+
+
+def test_embedded_service_run_with_images(random_checkpoint: Path, tmp_path: Path):
+    results = tmp_path / "embedded"
+    run = clear_scene("--model", str(random_checkpoint), "--rounds", "1", "--object-count", "2",
+                      "--threshold", "0.5", "--results", str(results), "--save-images")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    summary = check_results(results, 1)
+    assert len(list((results / "images").glob("round*_attempt*.png"))) == summary["attempts"]
+    assert (results / "images" / "round0000_sheet.png").exists()
+
+
+def test_without_a_model_the_run_explains_itself(tmp_path: Path, monkeypatch):
+    monkeypatch.setenv("VGN_MODEL", "none")  # the packaged default is not loaded either
+    run = clear_scene("--rounds", "1", "--results", str(tmp_path / "r"))
+    assert run.returncode == 2
+    assert "no model is configured" in run.stderr and "--model" in run.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene, extra", [("pile", ["--object-count", "10", "--noise"]),
+                                          ("packed", ["--views", "side", "--selection", "random"])])  # fmt: skip
+def test_longer_runs(server, tmp_path: Path, scene: str, extra: list[str]):
+    results = tmp_path / scene
+    run = clear_scene("--url", server.url, "--scene", scene, "--rounds", "3", "--threshold", "0.5",
+                      "--results", str(results), *extra)  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    check_results(results, 3)
+
+
+def test_baseline_planner_needs_no_model(tmp_path: Path, monkeypatch):
+    """clear-scene with the service's antipodal baseline runs on an embedded service without weights."""
+    monkeypatch.setenv("VGN_MODEL", "none")
+    results = tmp_path / "baseline"
+    run = clear_scene(
+        "--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--results", str(results)
+    )
+    assert run.returncode == 0, run.stderr
+    summary = check_results(results, 1)
+    assert json.loads((results / "config.json").read_text())["model"] == "antipodal"
+    assert summary["rounds"] == 1
+
+
+def test_benchmark_table_next_to_the_paper(tmp_path: Path):
+    from benchmarks.clutter import main
+
+    out = tmp_path / "bench"
+    assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
+                 "--renderer", "tiny", "--out", str(out)]) == 0  # fmt: skip
+    rows = json.loads((out / "table.json").read_text())
+    assert [(r["planner"], r["scenario"], r["rounds"]) for r in rows] == [("antipodal", "blocks-5", 1)]
+    assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
+    table = (out / "table.md").read_text()
+    assert "approach contact / nothing held / slipped / collision" in table
+    outcomes = rows[0]["outcomes"]
+    failures = " / ".join(
+        str(outcomes[k]) for k in ("approach_contact", "nothing_held", "slipped", "collision")
+    )
+    assert f"| {failures} |" in table, "the failure breakdown is in the row"
+    assert "87.6 / 90.1" in table and "88.6 / 39.4" in table, "the paper's Table 1 rows stand beside ours"
+    assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()
+    (out / "table.md").unlink()
+    assert main(["--report", "--out", str(out)]) == 0, "the table again from the results, running nothing"
+    assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()

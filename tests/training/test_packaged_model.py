@@ -1,0 +1,98 @@
+"""The model that ships in the package: the service loads it when nothing else is configured,
+it carries a card that belongs to it, and it clears a simulated table out of the box."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+
+from service.planner import GraspPlanner
+from service.settings import PACKAGED_MODEL, Settings
+from service.vgn.checkpoint import card_path, weights_id
+from tests.helpers.apps import serve
+from tests.helpers.frames import frame_files, meta_json
+from tests.helpers.runs import check_results, clear_scene
+from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+
+
+def fused_session(http: TestClient, session_id: str, scene: BoxScene) -> str:
+    """A session that fused six views of ``scene`` around the workspace."""
+    created = http.post("/sessions", json={"session_id": session_id, "intrinsics": INTRINSICS.model_dump()})
+    assert created.status_code == 201, created.text
+    for pose in circle_views(6):
+        files = frame_files(meta_json({"matrix": pose.tolist()}), scene.depth(pose).astype("<f4").tobytes())
+        answer = http.post(f"/sessions/{session_id}/frames", files=files)
+        assert answer.status_code == 200, answer.text
+    return session_id
+
+
+def test_the_service_loads_the_packaged_model_by_default(monkeypatch):
+    monkeypatch.delenv("VGN_MODEL", raising=False)
+    assert PACKAGED_MODEL.is_file(), "the package ships trained weights"
+    assert Settings().model_path() == PACKAGED_MODEL
+    with serve(PACKAGED_MODEL) as http:
+        model = http.get("/model").json()
+    assert model["loaded"] and model["source"] == str(PACKAGED_MODEL) and model["card"]["matches_weights"]
+
+
+def test_the_packaged_model_grasps_a_box_and_not_an_empty_table():
+    with serve(PACKAGED_MODEL) as http:
+        box = fused_session(http, "box", BoxScene())
+        grasps = http.get(f"/sessions/{box}/grasps").json()["grasps"]
+        assert grasps, "a lone 8 x 6 x 6 cm box is graspable"
+        # The origin is between the finger bases (docs/conventions.md): up to a finger depth from the contacts.
+        x, y, z = grasps[0]["position"]
+        assert 0.09 <= x <= 0.21 and 0.10 <= y <= 0.20 and TABLE_Z < z <= TABLE_Z + 0.11, (
+            "the best grasp is at the box"
+        )
+        empty = fused_session(
+            http, "empty", BoxScene(lower=(2.0, 2.0, TABLE_Z), upper=(2.01, 2.01, TABLE_Z + 0.01))
+        )
+        assert http.get(f"/sessions/{empty}/grasps").json()["grasps"] == [], (
+            "nothing to grasp on a bare table"
+        )
+
+
+def test_the_packaged_card_belongs_to_the_weights_and_says_how_to_rebuild_them():
+    card = json.loads(card_path(PACKAGED_MODEL).read_text())
+    assert card["model"]["weights_id"] == weights_id(PACKAGED_MODEL)
+    assert sum(d["scenes"] for d in card["datasets"]) >= 1000, "trained on at least 1,000 scenes"
+    assert 0.0 < card["threshold"] <= 1.0
+    assert card["command"].startswith("vgn-train ")
+    steps = "\n".join(card["reproduce"])
+    for step in ("object_split", "generate-data", "vgn-pack-data", "vgn-train"):
+        assert step in steps, f"the card's reproduce steps lack {step}"
+    shards = [shard for data in card["packed_data"] for shard in data["shards"]]
+    assert shards and all(len(shard["sha256"]) == 64 for shard in shards), "the card names its shards by hash"
+    assert card["history"][-1]["steps"] > 0, "the card counts the optimizer steps"
+    assert card["executed_grasps"]["rounds"] > 0, "the card says how the model grasped held-out objects"
+
+
+def test_the_shards_the_packaged_model_learned_from_are_in_the_repository():
+    """The training data accumulates in ``data/``: every shard the card names is there, unchanged."""
+    card = json.loads(card_path(PACKAGED_MODEL).read_text())
+    repository = PACKAGED_MODEL.parents[2]
+    for data in card["packed_data"]:
+        for shard in data["shards"]:
+            path = repository / data["folder"] / shard["file"]
+            assert path.is_file(), f"{path} is missing"
+            assert hashlib.sha256(path.read_bytes()).hexdigest() == shard["sha256"], f"{path} changed"
+
+
+def test_clear_scene_out_of_the_box(tmp_path: Path, monkeypatch):
+    """The README's first command, short: no --model, no --threshold, an embedded service."""
+    monkeypatch.delenv("VGN_MODEL", raising=False)
+    monkeypatch.setenv("VGN_TORCH_THREADS", "1")
+    results = tmp_path / "blocks"
+    run = clear_scene("--scene", "blocks", "--rounds", "2", "--object-count", "3", "--results", str(results))
+    assert run.returncode == 0, run.stderr
+    summary = check_results(results, 2)
+    config = json.loads((results / "config.json").read_text())
+    assert (
+        config["model"] == weights_id(PACKAGED_MODEL)
+        and config["threshold"] == GraspPlanner.from_path(PACKAGED_MODEL, device="cpu").default_threshold
+    )
+    assert summary["successes"] >= 2, "the trained model removes objects from a simulated table"
