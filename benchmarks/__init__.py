@@ -1,0 +1,1 @@
+"""Benchmarks run as ``python -m benchmarks.NAME``: latency, clutter removal, learning curve and more."""

@@ -32,7 +32,9 @@ def chart_series(
             r["scenario"]: r for r in rows if (r["planner"], r["selection"]) == (planner, selection)
         }
 
-        def measured(key: str, by_scenario=by_scenario) -> list[tuple[float, float, float] | None]:
+        def measured(
+            key: str, by_scenario: dict[str, dict] = by_scenario
+        ) -> list[tuple[float, float, float] | None]:
             out = []
             for scenario in scenarios:
                 row = by_scenario.get(scenario)

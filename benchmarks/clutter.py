@@ -1,6 +1,6 @@
-"""Clutter removal for VGN and the antipodal baseline on the same seeds, next to the paper.
+r"""Clutter removal for VGN and the antipodal baseline on the same seeds, next to the paper.
 
-    python -m benchmarks.clutter --model vgn.safetensors --rounds 100 \\
+    python -m benchmarks.clutter --model vgn.safetensors --rounds 100 \
         --pile-objects ~/vgn-data/objects/pile/heldout --packed-objects ~/vgn-data/objects/packed/heldout
 
 Scenarios (the paper's Table 1): blocks, pile and packed with 5 objects, pile with 10. Blocks
@@ -17,7 +17,9 @@ import argparse
 import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from benchmarks.chart import write_chart
 from client.embedded import EmbeddedService
@@ -28,6 +30,9 @@ from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
 from vgn_data.files import write_atomically
+
+if TYPE_CHECKING:
+    from sim_worker.ray_runner import ClutterPool, RoundProgress
 
 #: VGN paper, Table 1, VGN at threshold 0.9 (random selection): (success %, cleared %).
 PAPER_TABLE_1 = {
@@ -47,6 +52,7 @@ DEFAULT_SCENARIOS = ["blocks-5", "pile-5", "packed-5", "pile-10"]
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line; the module docstring is its help text."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -99,6 +105,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def scenario_config(args: argparse.Namespace, planner: str, selection: str, scenario: str) -> ClutterConfig:
+    """The clutter-removal settings of one run: ``scenario`` is
+    SCENE-COUNT, and each planner gets its own threshold option."""
     scene, count = scenario.rsplit("-", 1)
     objects = {"pile": args.pile_objects, "packed": args.packed_objects}.get(scene)
     return ClutterConfig(
@@ -108,7 +116,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
     )  # fmt: skip
 
 
-def combinations(args: argparse.Namespace):
+def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path]]:
     """(planner, selection, scenario, results folder) for every run the arguments ask for."""
     for planner in args.planners:
         for selection in args.selections:
@@ -118,11 +126,17 @@ def combinations(args: argparse.Namespace):
 
 
 def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
+    """One line of the results table: the run's identity, its threshold and model, and its summary."""
     return {"planner": planner, "selection": selection, "scenario": scenario,
             "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
 
 
-def run_all(args: argparse.Namespace, vgn: VGNClient | None, ray_pool=None, progress=None) -> list[dict]:
+def run_all(
+    args: argparse.Namespace,
+    vgn: VGNClient | None,
+    ray_pool: ClutterPool | None = None,
+    progress: RoundProgress | None = None,
+) -> list[dict]:
     """Every combination through ``vgn`` in this process, or over the Ray workers of ``ray_pool``
     (``progress``: one progress bar over the rounds of all combinations)."""
     rows = []
@@ -162,6 +176,8 @@ def report_all(args: argparse.Namespace) -> list[dict]:
 
 
 def format_row(row: dict) -> str:
+    """One run on one line, for progress: rounds, success and cleared with intervals, planning time."""
+
     def pct(key: str) -> str:
         low, high = row[f"{key}_ci95"]
         return f"{row[key]:5.1f} ({low:.1f}-{high:.1f})" if row[key] is not None else "    -"
@@ -177,6 +193,7 @@ def failures_cell(row: dict) -> str:
 
 
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
+    """The results beside the paper's VGN and GPD figures, as a Markdown table with a line on the settings."""
     lines = [
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
         f"{args.views} view(s){', depth noise' if args.noise else ''}",
@@ -201,6 +218,7 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run (or with ``--report`` only tabulate) every combination; the exit status for the shell."""
     args = parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     if args.report:
@@ -255,6 +273,7 @@ def run_on_ray(args: argparse.Namespace) -> int:
 
 
 def write_table(rows: list[dict], args: argparse.Namespace) -> int:
+    """Print the table and write it as table.md, table.json and the table.png chart under ``--out``."""
     table = markdown_table(rows, args)
     write_atomically(args.out / "table.md", table)
     write_atomically(args.out / "table.json", json.dumps(rows, indent=2) + "\n")

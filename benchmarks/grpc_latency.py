@@ -67,6 +67,7 @@ FINE_FUSION = f"TSDFVolume.integrate, fine {CLOUD_RESOLUTION}³ ({STREAM_FRAMES}
 
 
 def frame_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[Operation]:
+    """One frame upload over each front end, on a session of its own, cycling through ``frames``."""
     n, group = len(frames), "9 frame HTTP|gRPC"
     http_id = http.create_session(intrinsics=INTRINSICS).session_id
     grpc_id = rpc.create_session(intrinsics=INTRINSICS).session_id
@@ -84,6 +85,7 @@ def frame_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[O
 
 
 def grasp_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[Operation]:
+    """A grasp request over each front end on one shared 6-view session, each after an untimed new frame."""
     session_id = http.create_session(intrinsics=INTRINSICS).session_id  # one session, both front ends
     for depth, pose in zip(frames.depths, frames.poses, strict=True):
         http.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
@@ -196,10 +198,12 @@ def measure(weights: Path, threads: int | None, device: str, frames: Frames, rep
 
 
 def frames_per_second(row: Measurement, frames: int = STREAM_FRAMES) -> float:
+    """The rate a row's median stream call reaches, ``frames`` being the frames in one call."""
     return frames / (row.p50 / 1e3)
 
 
 def targets(rows: list[Measurement]) -> list[dict[str, Any]]:
+    """The gRPC targets, each with its value and whether it was met: upload ratio and stream rates."""
     ratio = find(rows, FRAME_GRPC).p50 / find(rows, FRAME_HTTP).p50
     rate = frames_per_second(find(rows, STREAM_GRPC))
     long_rate = frames_per_second(find(rows, LONG_STREAM_GRPC), LONG_STREAM_FRAMES)
@@ -229,6 +233,7 @@ def targets(rows: list[Measurement]) -> list[dict[str, Any]]:
 
 
 def format_rates(rows: list[Measurement]) -> str:
+    """The stream rows as rates, and the cost of a cloud read next to the fusion it waits for."""
     http, rpc = frames_per_second(find(rows, STREAM_HTTP)), frames_per_second(find(rows, STREAM_GRPC))
     long = find(rows, LONG_STREAM_GRPC).p50 / LONG_STREAM_FRAMES
     coarse = find(rows, LONG_STREAM_COARSE).p50 / LONG_STREAM_FRAMES
@@ -243,6 +248,7 @@ def format_rates(rows: list[Measurement]) -> str:
 
 
 def format_targets(checks: list[dict[str, Any]]) -> str:
+    """One line per target check, with its comparison and PASS or MISS."""
     lines = []
     for check in checks:
         comparison = ">=" if check["unit"] == "frames/s" else "<="

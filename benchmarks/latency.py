@@ -163,17 +163,21 @@ class Measurement:
     note: str = ""
 
     def percentile(self, q: float) -> float:
+        """The ``q``-th percentile of the samples in ms; NaN before any sample."""
         return float(np.percentile(self.samples_ms, q)) if self.samples_ms else float("nan")
 
     @property
     def p50(self) -> float:
+        """Median latency in ms."""
         return self.percentile(50)
 
     @property
     def p95(self) -> float:
+        """95th-percentile latency in ms: the slow tail a robot waits for."""
         return self.percentile(95)
 
     def as_dict(self) -> dict[str, Any]:
+        """The row for the JSON report: percentiles, mean, count and the raw samples."""
         mean = statistics.fmean(self.samples_ms) if self.samples_ms else float("nan")
         return {
             "name": self.name,
@@ -241,6 +245,7 @@ class Frames:
 
 
 def render_frames(count: int = VIEWS) -> Frames:
+    """The ``BoxScene`` rendered from ``count`` views around it, in every upload form."""
     scene = BoxScene()
     poses = circle_views(count)
     depths = [scene.depth(pose, INTRINSICS) for pose in poses]
@@ -266,6 +271,7 @@ def weights_path(model: Path | None, directory: Path) -> tuple[Path, bool]:
 
 # 1. Fusion -----------------------------------------------------------------------------------
 def naive_volume() -> o3d.pipelines.integration.UniformTSDFVolume:
+    """An Open3D TSDF volume over the benchmark's workspace, as a user would build it."""
     voxel = WORKSPACE_SIZE / RESOLUTION
     return o3d.pipelines.integration.UniformTSDFVolume(
         length=WORKSPACE_SIZE,
@@ -294,6 +300,7 @@ def naive_integrate(
 
 
 def fusion_operations(frames: Frames) -> list[Operation]:
+    """Direct Open3D fusion (the baseline) beside the service's ``TSDFVolume.integrate``."""
     i, n = INTRINSICS, len(frames)
     intrinsic = o3d.camera.PinholeCameraIntrinsic(i.width, i.height, i.fx, i.fy, i.cx, i.cy)
     naive, cached = naive_volume(), TSDFVolume(WORKSPACE_SIZE, RESOLUTION)
@@ -317,6 +324,7 @@ def new_session(core: PlanningService) -> str:
 
 
 def core_frame_operations(core: PlanningService, frames: Frames) -> list[Operation]:
+    """In-process uploads of a numpy frame, raw float32 bytes and a 16-bit PNG, a session each."""
     n, group = len(frames), "2 frame in-process"
     metas = [
         FrameMeta(camera_pose=Pose.from_matrix(p), depth_scale=DEPTH_SCALE, max_depth=MAX_DEPTH)
@@ -361,6 +369,7 @@ def core_plan_operation(core: PlanningService, frames: Frames, query: GraspQuery
 
 # 4. Network baseline -------------------------------------------------------------------------
 def fused_grid(frames: Frames) -> np.ndarray:
+    """The network's input grid after fusing every view, for the direct network rows."""
     volume = TSDFVolume(WORKSPACE_SIZE, RESOLUTION)
     for depth, pose in zip(frames.depths, frames.poses, strict=True):
         volume.integrate(depth, INTRINSICS, pose, MAX_DEPTH)
@@ -418,6 +427,7 @@ def running_service(
 
 
 def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
+    """Frame uploads over HTTP: raw float32 (the target), a multipart upload and a 16-bit PNG."""
     n, group = len(frames), "3 frame HTTP"
     raw_id = client.create_session(intrinsics=INTRINSICS).session_id
     png_id = client.create_session(intrinsics=INTRINSICS).session_id
@@ -529,6 +539,7 @@ def throughput(url: str, frames: Frames, sessions: int, requests: int) -> dict[s
 
 
 def concurrency_rows(url: str, frames: Frames, requests: int) -> list[dict[str, Any]]:
+    """A throughput row per session count in ``CONCURRENCY``, each with its speed-up over one session."""
     rows = [throughput(url, frames, sessions, requests) for sessions in CONCURRENCY]
     single = rows[0]["requests_per_s"]
     for row in rows:
@@ -538,10 +549,13 @@ def concurrency_rows(url: str, frames: Frames, requests: int) -> list[dict[str, 
 
 # Report ------------------------------------------------------------------------------------
 def find(rows: list[Measurement], name: str) -> Measurement:
+    """The row called ``name`` (StopIteration when the run did not measure it)."""
     return next(row for row in rows if row.name == name)
 
 
 def check(name: str, value: float, unit: str, target: float, at_most: bool = True) -> dict[str, Any]:
+    """One target check: the value, its target and whether it
+    passed (``at_most``: the value must not exceed it)."""
     return {
         "name": name,
         "value": round(value, 3),
@@ -553,6 +567,7 @@ def check(name: str, value: float, unit: str, target: float, at_most: bool = Tru
 
 
 def targets(rows: list[Measurement], concurrency: list[dict[str, Any]], gpu: bool) -> list[dict[str, Any]]:
+    """The project's targets checked on this run; the throughput one only on a GPU."""
     grasp = find(rows, GRASPS_HTTP).p50
     again = find(rows, GRASPS_HTTP_AGAIN).p50
     checks = [
@@ -586,6 +601,7 @@ def targets(rows: list[Measurement], concurrency: list[dict[str, Any]], gpu: boo
 
 
 def format_table(rows: list[Measurement]) -> str:
+    """The rows as a fixed-width text table: group, name, p50, p95, sample count and note."""
     width = max(len(row.name) for row in rows) + 2
     header = f"{'group':<20}{'name':<{width}}{'p50 ms':>9}{'p95 ms':>9}{'n':>5}  note"
     lines = [header, "-" * (len(header) + 4)]
@@ -598,6 +614,7 @@ def format_table(rows: list[Measurement]) -> str:
 
 
 def format_targets(checks: list[dict[str, Any]]) -> str:
+    """One line per target check, with its value, target and PASS or MISS."""
     lines = []
     for check in checks:
         unit = " ms" if check["unit"] == "ms" else "x"
@@ -610,6 +627,7 @@ def format_targets(checks: list[dict[str, Any]]) -> str:
 
 
 def environment(args: argparse.Namespace, weights: Path, random_weights: bool) -> dict[str, Any]:
+    """Versions, machine, settings and inputs of the run, so that its figures can be compared."""
     return {
         "python": platform.python_version(),
         "torch": torch.__version__,
@@ -635,6 +653,7 @@ def load_average() -> list[float]:
 
 
 def format_header(env: dict[str, Any]) -> str:
+    """The environment as the lines that open the printed report."""
     weights = (
         "random-initialised (the network's cost does not depend on its weights; the number of grasps does)"
         if env["random_weights"]
@@ -674,6 +693,7 @@ def write_json(path: Path, payload: dict[str, Any]) -> None:
 
 # Main --------------------------------------------------------------------------------------
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line (``--repeats``, ``--model``, ``--threads``, ...), checked for sane counts."""
     parser = argparse.ArgumentParser(
         prog="python -m benchmarks.latency",
         description=__doc__.split("\n\n")[0],
@@ -726,6 +746,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 @dataclass
 class Results:
+    """Everything ``measure_all`` collects, for printing and the JSON file."""
+
     rows: list[Measurement]
     grasps: dict[str, int]
     concurrency: list[dict[str, Any]]
@@ -777,6 +799,7 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
 
 
 def format_concurrency(rows: list[dict[str, Any]]) -> str:
+    """The throughput rows as a text table."""
     lines = [f"{'sessions':>8}{'requests':>10}{'req/s':>9}{'x one':>8}{'p50 ms':>9}{'p95 ms':>9}"]
     for row in rows:
         lines.append(
@@ -805,6 +828,7 @@ def grpc_section(
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Measure, print the report and the target checks, and write the JSON file if asked."""
     args = parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="vgn-bench-") as directory:
         weights, random_weights = weights_path(args.model, Path(directory))

@@ -1,7 +1,7 @@
-"""Executed-grasp success against the number of training scenes: how much data the model needs.
+r"""Executed-grasp success against the number of training scenes: how much data the model needs.
 
-    python -m benchmarks.learning_curve --sizes 1000 2000 4000 --scenario pile-5 --rounds 100 \\
-        --objects ~/vgn-data/objects/pile/heldout --out ~/vgn-data/curve \\
+    python -m benchmarks.learning_curve --sizes 1000 2000 4000 --scenario pile-5 --rounds 100 \
+        --objects ~/vgn-data/objects/pile/heldout --out ~/vgn-data/curve \
         -- --data data --epochs 20 --copies 4 --patience 4
 
 Everything after ``--`` is a ``vgn-train`` command line without ``--out``: each size trains the
@@ -94,10 +94,12 @@ def parse_args(argv: list[str]) -> tuple[argparse.Namespace, list[str]]:
 
 
 def weights_path(out: Path, size: int) -> Path:
+    """Where the model trained on ``size`` scenes is written (its checkpoint and card beside it)."""
     return out / f"scenes-{size}" / "vgn.safetensors"
 
 
 def bench_folder(out: Path, size: int) -> Path:
+    """The clutter-benchmark results of the ``size``-scene model: a resumable folder."""
     return out / f"scenes-{size}" / "bench"
 
 
@@ -184,6 +186,7 @@ def fit_log_curve(points: list[CurvePoint], target: float) -> LogFit | None:
 
 
 def markdown(points: list[CurvePoint], fit: LogFit | None, args: argparse.Namespace) -> str:
+    """The measured points and the fit as Markdown, with the fit's caveat spelled out."""
     lines = [
         f"{args.scenario}, held-out objects, random selection, seed {args.seed}",
         "",
@@ -260,6 +263,8 @@ def write_plot(points: list[CurvePoint], fit: LogFit | None, path: Path) -> Path
 
 
 def report(args: argparse.Namespace) -> int:
+    """Tabulate, fit and plot whatever sizes are measured so
+    far into ``--out``; sizes still missing are listed."""
     from benchmarks.clutter import PAPER_TABLE_1
 
     points = [p for p in (read_point(args.out, size) for size in args.sizes) if p is not None]
@@ -279,6 +284,7 @@ def report(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Train and benchmark every size the phase asks for, then report."""
     args, train_argv = parse_args(sys.argv[1:] if argv is None else argv)
     args.out.mkdir(parents=True, exist_ok=True)
     for size in args.sizes:

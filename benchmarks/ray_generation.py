@@ -27,6 +27,8 @@ LABELLED = re.compile(r"labelled (\d+) grasps in ([\d.]+) s")
 
 
 def label(url: str, out: Path, args: argparse.Namespace, ray: bool) -> dict:
+    """Run one ``generate-data`` command (``--ray`` or
+    ``--workers``) and read its labelling rate from its output."""
     command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", url, "--scene", "pile",
                "--objects", args.objects, "--scenes", str(args.scenes), "--points", str(args.points),
                "--renderer", args.renderer, "--workers", str(args.workers), "--out", str(out)]  # fmt: skip
@@ -44,6 +46,7 @@ def label(url: str, out: Path, args: argparse.Namespace, ray: bool) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Alternate the two modes on one embedded service; print their rates and the Ray/workers ratio."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

@@ -68,6 +68,7 @@ def child(condition: str, steps: int, threads: int) -> dict[str, Any]:
 
 
 def run_child(condition: str, steps: int, threads: int) -> dict[str, Any]:
+    """Run ``child`` in a fresh interpreter, without the OpenMP variables this process inherited."""
     command = [sys.executable, "-m", "benchmarks.training_openmp", "--child", condition]
     command += ["--steps", str(steps), "--threads", str(threads)]
     env = {
@@ -78,6 +79,8 @@ def run_child(condition: str, steps: int, threads: int) -> dict[str, Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Alternate the two conditions in fresh processes and print their median step times and ratio; with
+    ``--child``, be one of those processes."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--processes", type=int, default=3, help="fresh processes per condition")
     parser.add_argument("--steps", type=int, default=5, help="timed steps per process")

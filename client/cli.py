@@ -8,7 +8,8 @@
     vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
 
 ``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key;
-a ``grpc://HOST:PORT`` URL talks gRPC (needs the [grpc] extra) instead of HTTP.
+a ``grpc://HOST:PORT`` URL talks gRPC (needs the [grpc] extra) instead of HTTP. Every command
+takes ``--log-level`` (debug, info, warning, error): what the libraries report on stderr.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import httpx
 
 from client.connect import connect, is_grpc_url
 from client.http import DEFAULT_URL, VGNClient, VGNError
+from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
 
@@ -44,6 +46,7 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``vgn-client`` command line: one subcommand per task, each with its own options."""
     parser = argparse.ArgumentParser(
         prog="vgn-client", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -91,10 +94,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
+    # On each subcommand rather than on vgn-client itself, so it goes after the command name like
+    # every other option (a top-level default would be overwritten by a subcommand's anyway).
+    for command in commands.choices.values():
+        add_log_level_option(command)
     return parser
 
 
-def _add_generate_data(commands) -> None:
+def _add_generate_data(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     gen = commands.add_parser(
         "generate-data",
         help="label grasps in simulation through the service (VGN's raw dataset layout)",
@@ -138,7 +145,7 @@ def _add_generate_data(commands) -> None:
     clean.add_argument("--seed", type=int, default=0)
 
 
-def _add_clear_scene(commands) -> None:
+def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     clear = commands.add_parser(
         "clear-scene",
         help="clutter removal: grasp objects off a table until it is clear",
@@ -311,13 +318,17 @@ def _add_sim_options(parser: argparse.ArgumentParser) -> None:
 
 
 def add_ray_option(parser: argparse.ArgumentParser) -> None:
+    """``--ray [ADDRESS]``: absent runs in local processes, bare starts a local Ray instance."""
     parser.add_argument("--ray", nargs="?", const="local", metavar="ADDRESS",
                         help="spread the work over Ray workers: a local Ray instance, or 'auto' / an address "
                         "to join a running cluster (needs the ray extra)")  # fmt: skip
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one ``vgn-client`` command. Exit status: 0 done, 1 the service refused, is not ready or cannot be
+    reached, 2 a usage error or a missing extra."""
     args = build_parser().parse_args(argv)
+    configure_logging(args.log_level)
     if args.command == "serve":
         return _serve(args)
     if args.command in SIM_COMMANDS:

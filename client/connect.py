@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING
 
 from client.http import VGNClient
@@ -13,15 +14,19 @@ from client.http import VGNClient
 if TYPE_CHECKING:
     from client.grpc_client import GRPCClient
 
+log = logging.getLogger("vgn.client")
+
 GRPC_SCHEMES = ("grpc://", "grpcs://")
 
 
 def is_grpc_url(url: str) -> bool:
+    """Whether ``url`` names the gRPC front end (``grpc://`` or ``grpcs://``, any case)."""
     return url.lower().startswith(GRPC_SCHEMES)
 
 
 def connect(url: str, api_key: str | None = None, timeout: float = 30.0) -> VGNClient | GRPCClient:
     """A client for ``url``; both kinds have the same methods and return types."""
+    log.debug("connecting to %s over %s", url, "gRPC" if is_grpc_url(url) else "HTTP")
     if not is_grpc_url(url):
         return VGNClient(url, api_key=api_key, timeout=timeout)
     try:

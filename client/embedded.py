@@ -21,6 +21,7 @@ from client.lifetime import preexec_for_child
 
 
 def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that was free a moment ago: the OS picks it, the probe socket lets it go."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
         probe.bind((host, 0))
         return probe.getsockname()[1]
@@ -60,6 +61,8 @@ class EmbeddedService:
         self._process: subprocess.Popen | None = None
 
     def start(self) -> EmbeddedService:
+        """Start the child and wait for ``/healthz``; a child that
+        exits or never answers is stopped and reported with its log."""
         command = [
             sys.executable,
             "-m",
@@ -112,6 +115,7 @@ class EmbeddedService:
         return self._log.read().decode(errors="replace")
 
     def stop(self) -> None:
+        """Terminate the child (killing it after 10 s) and close its log; a no-op once stopped."""
         if self._process is None:
             return
         if self._process.poll() is None:

@@ -131,9 +131,11 @@ class GRPCClient:
         return Readiness(ready=False, detail="not serving: no model is loaded")
 
     def model(self) -> ModelInfo:
+        """As ``VGNClient.model``."""
         return self._call(self._stub.GetModelInfo, pb.GetModelInfoRequest(), convert.model_info)
 
     def metrics(self) -> str:
+        """Not over gRPC: metrics are Prometheus text, served by the HTTP front end only."""
         raise NotImplementedError("Prometheus metrics are served over HTTP only: GET /metrics")
 
     def wait_until_up(self, timeout: float = 60.0) -> None:
@@ -155,6 +157,7 @@ class GRPCClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
     ) -> SessionInfo:
+        """As ``VGNClient.create_session``."""
         request = pb.CreateSessionRequest(
             session_id=session_id,
             workspace=convert.workspace_message(workspace or Workspace()),
@@ -163,17 +166,21 @@ class GRPCClient:
         return self._call(self._stub.CreateSession, request, convert.session_info)
 
     def sessions(self) -> SessionList:
+        """As ``VGNClient.sessions``."""
         return self._call(self._stub.ListSessions, pb.ListSessionsRequest(), convert.session_list)
 
     def session(self, session_id: str) -> SessionInfo:
+        """As ``VGNClient.session``."""
         return self._call(
             self._stub.GetSession, pb.GetSessionRequest(session_id=session_id), convert.session_info
         )
 
     def delete_session(self, session_id: str) -> None:
+        """As ``VGNClient.delete_session``."""
         self._call(self._stub.DeleteSession, pb.DeleteSessionRequest(session_id=session_id), lambda a: None)
 
     def reset_session(self, session_id: str) -> SessionInfo:
+        """As ``VGNClient.reset_session``."""
         request = pb.ResetSessionRequest(session_id=session_id)
         return self._call(self._stub.ResetSession, request, convert.session_info)
 
@@ -229,6 +236,7 @@ class GRPCClient:
         return self._call(self._stub.GetGrasps, request, convert.grasp_result)
 
     def tsdf(self, session_id: str) -> np.ndarray:
+        """As ``VGNClient.tsdf``: the (N, N, N) float32 grid."""
         return self._call(
             self._stub.GetGrid,
             pb.GetGridRequest(session_id=session_id),
@@ -236,6 +244,7 @@ class GRPCClient:
         )
 
     def cloud(self, session_id: str) -> np.ndarray:
+        """As ``VGNClient.cloud``: (M, 6) float32 points and normals."""
         return self._call(
             self._stub.GetCloud,
             pb.GetCloudRequest(session_id=session_id),
@@ -243,6 +252,7 @@ class GRPCClient:
         )
 
     def close(self) -> None:
+        """Close the channel; calls after it fail."""
         self._channel.close()
 
     def __enter__(self) -> GRPCClient:

@@ -240,30 +240,39 @@ class VGNClient:
         return call.parse(raise_for_error(self._http.request(call.method, call.path, **call.kwargs)))
 
     def health(self) -> dict:
+        """The ``/healthz`` body: answers as soon as the process is up, model or not."""
         return self._run(Calls.health())
 
     def model(self) -> ModelInfo:
+        """Which weights the service runs, on which device, and their operating threshold."""
         return self._run(Calls.model())
 
     def metrics(self) -> str:
+        """The Prometheus text exposition, for scraping by hand or in tests."""
         return self._run(Calls.metrics())
 
     def sessions(self) -> SessionList:
+        """Every live session, with the service's session limit."""
         return self._run(Calls.sessions())
 
     def session(self, session_id: str) -> SessionInfo:
+        """A session's workspace, intrinsics and frame count; ``NotFound`` once it expired."""
         return self._run(Calls.session(session_id))
 
     def delete_session(self, session_id: str) -> None:
+        """Drop a session and free its volume; ``NotFound`` if it is already gone."""
         return self._run(Calls.delete_session(session_id))
 
     def reset_session(self, session_id: str) -> SessionInfo:
+        """Empty a session's volume but keep its id and workspace, for a new scene."""
         return self._run(Calls.reset_session(session_id))
 
     def tsdf(self, session_id: str) -> np.ndarray:
+        """The fused (N, N, N) float32 grid the network reads, indexed [x, y, z] in the workspace frame."""
         return self._run(Calls.tsdf(session_id))
 
     def cloud(self, session_id: str) -> np.ndarray:
+        """Surface points and outward normals, (M, 6) float32 in the world frame."""
         return self._run(Calls.cloud(session_id))
 
     def ready(self) -> Readiness:
@@ -276,6 +285,7 @@ class VGNClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
     ) -> SessionInfo:
+        """Open a session; the service picks an id when none is given."""
         return self._run(Calls.create_session(session_id, workspace, intrinsics))
 
     def add_frame(
@@ -313,6 +323,7 @@ class VGNClient:
                 time.sleep(0.1)
 
     def close(self) -> None:
+        """Close the connection pool, a passed-in ``http`` client included."""
         self._http.close()
 
     def __enter__(self) -> VGNClient:
@@ -339,33 +350,43 @@ class AsyncVGNClient:
         return call.parse(raise_for_error(await self._http.request(call.method, call.path, **call.kwargs)))
 
     async def health(self) -> dict:
+        """As ``VGNClient.health``."""
         return await self._run(Calls.health())
 
     async def model(self) -> ModelInfo:
+        """As ``VGNClient.model``."""
         return await self._run(Calls.model())
 
     async def metrics(self) -> str:
+        """As ``VGNClient.metrics``."""
         return await self._run(Calls.metrics())
 
     async def sessions(self) -> SessionList:
+        """As ``VGNClient.sessions``."""
         return await self._run(Calls.sessions())
 
     async def session(self, session_id: str) -> SessionInfo:
+        """As ``VGNClient.session``."""
         return await self._run(Calls.session(session_id))
 
     async def delete_session(self, session_id: str) -> None:
+        """As ``VGNClient.delete_session``."""
         return await self._run(Calls.delete_session(session_id))
 
     async def reset_session(self, session_id: str) -> SessionInfo:
+        """As ``VGNClient.reset_session``."""
         return await self._run(Calls.reset_session(session_id))
 
     async def tsdf(self, session_id: str) -> np.ndarray:
+        """As ``VGNClient.tsdf``."""
         return await self._run(Calls.tsdf(session_id))
 
     async def cloud(self, session_id: str) -> np.ndarray:
+        """As ``VGNClient.cloud``."""
         return await self._run(Calls.cloud(session_id))
 
     async def ready(self) -> Readiness:
+        """As ``VGNClient.ready``: a 503 is an answer, not an error."""
         return _readiness(await self._http.get("/readyz"))
 
     async def create_session(
@@ -374,6 +395,7 @@ class AsyncVGNClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
     ) -> SessionInfo:
+        """As ``VGNClient.create_session``."""
         return await self._run(Calls.create_session(session_id, workspace, intrinsics))
 
     async def add_frame(
@@ -385,17 +407,21 @@ class AsyncVGNClient:
         depth_scale: float = 1000.0,
         max_depth: float = 2.0,
     ) -> FrameResult:
+        """As ``VGNClient.add_frame``."""
         return await self._run(
             Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth)
         )
 
     async def grasps(self, session_id: str, **options: Any) -> GraspResult:
+        """As ``VGNClient.grasps``."""
         return await self._run(Calls.grasps(session_id, **options))
 
     async def view_page(self, session_id: str, refresh: float = 0.0, **options: Any) -> str:
+        """As ``VGNClient.view_page``."""
         return await self._run(Calls.view_page(session_id, refresh, **options))
 
     async def aclose(self) -> None:
+        """Close the connection pool (the async counterpart of ``close``)."""
         await self._http.aclose()
 
     async def __aenter__(self) -> AsyncVGNClient:

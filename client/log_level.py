@@ -10,6 +10,7 @@ LEVELS = ("debug", "info", "warning", "error")
 
 
 def add_log_level_option(parser: argparse.ArgumentParser, default: str = "warning") -> None:
+    """Add ``--log-level`` to ``parser``; ``configure_logging`` applies the choice after parsing."""
     parser.add_argument(
         "--log-level",
         choices=LEVELS,

@@ -81,6 +81,7 @@ class Pose(_Model):
         return cls.model_validate({"matrix": np.asarray(matrix).tolist()})
 
     def as_matrix(self) -> np.ndarray:
+        """The 4×4 homogeneous matrix child→parent."""
         from client.geometry import matrix_from_pose
 
         return matrix_from_pose(np.asarray(self.position), np.asarray(self.orientation))
@@ -132,10 +133,13 @@ class Workspace(_Model):
 
     @property
     def voxel_size(self) -> float:
+        """Edge length of one voxel in metres."""
         return self.size / self.resolution
 
 
 class SessionCreate(_Model):
+    """Body of ``POST /sessions``: every field is optional."""
+
     session_id: str | None = Field(
         default=None, pattern=SESSION_ID_PATTERN, description="chosen id; generated when absent"
     )
@@ -146,6 +150,8 @@ class SessionCreate(_Model):
 
 
 class SessionInfo(_Model):
+    """A session's state: its workspace, default intrinsics, fused frames and expiry."""
+
     session_id: str
     workspace: Workspace
     intrinsics: Intrinsics | None
@@ -157,6 +163,8 @@ class SessionInfo(_Model):
 
 
 class SessionList(_Model):
+    """The live sessions and how many the service keeps at most."""
+
     sessions: list[SessionInfo]
     max_sessions: int
 
@@ -171,6 +179,8 @@ class FrameMeta(_Model):
 
 
 class FrameResult(_Model):
+    """What fusing one frame did: the session's frame count and the time it took."""
+
     session_id: str
     frame_count: int
     integration_ms: float = Field(description="time to integrate this frame")
@@ -268,15 +278,18 @@ class GraspQuery(_Model):
 
     @property
     def crop_box(self) -> tuple[tuple[float, ...] | None, tuple[float, ...] | None] | None:
+        """``crop_min`` and ``crop_max`` as numbers (either may be ``None``), or ``None`` without a crop."""
         if self.crop_min is None and self.crop_max is None:
             return None
         return _parse_vector3("crop_min", self.crop_min), _parse_vector3("crop_max", self.crop_max)
 
     @property
     def approach_direction(self) -> tuple[float, float, float] | None:
+        """``approach`` as numbers, or ``None`` when not given."""
         return _parse_vector3("approach", self.approach)
 
     def to_params(self) -> dict[str, Any]:
+        """Query parameters for the request, the options left unset omitted."""
         return self.model_dump(exclude_none=True)
 
 
@@ -290,12 +303,15 @@ class Grasp(_Model):
     quality: float = Field(ge=0.0, le=1.0)
 
     def as_matrix(self) -> np.ndarray:
+        """The 4×4 grasp frame → world matrix."""
         from client.geometry import matrix_from_pose
 
         return matrix_from_pose(np.asarray(self.position), np.asarray(self.orientation))
 
 
 class GraspResult(_Model):
+    """The grasps of one request, with the timings and the model and threshold behind them."""
+
     grasps: list[Grasp] = Field(description="best first")
     planning_ms: float = Field(description="grid read-out + network + detection on the service")
     integration_ms: float = Field(description="total integration time of the fused frames")
@@ -305,6 +321,8 @@ class GraspResult(_Model):
 
 
 class ModelInfo(_Model):
+    """The loaded weights (or why none are), where they run, and how they are used."""
+
     loaded: bool
     model_id: str | None = Field(description="sha256 prefix of the weights file")
     source: str | None = Field(description="where the weights were loaded from")
@@ -330,10 +348,14 @@ class ModelInfo(_Model):
 
 
 class Health(_Model):
+    """Liveness: ``status`` is "ok" whenever the process answers."""
+
     status: str
 
 
 class Readiness(_Model):
+    """Whether grasps can be planned now, and why not when they cannot."""
+
     ready: bool
     detail: str
 

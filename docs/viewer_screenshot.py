@@ -26,6 +26,8 @@ from tests.helpers.browser import headless_chromium
 
 
 def main() -> None:
+    """Render the scene, fuse it in an embedded service and
+    save the viewer's screenshot with the best grasp picked."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

@@ -73,6 +73,7 @@ class CloudFusion:
             self._wake.notify()
 
     def forget(self, queue: FusionQueue) -> None:
+        """Stop fusing ``queue`` (its volume closed); frames it still holds are its own to drop."""
         with self._wake:
             self._queues.discard(queue)
 
@@ -94,14 +95,18 @@ class CloudFusion:
         return thread is not None and thread.is_alive()
 
     def account(self, delta_bytes: int) -> None:
+        """Add (or with a negative ``delta_bytes`` remove) queued frame bytes, across every volume."""
         with self._bytes_lock:
             self._queued_bytes += delta_bytes
 
     def over_budget(self) -> bool:
+        """Whether the queued frames of all volumes together reach
+        ``max_queued_bytes``: uploads then wait for room."""
         return self._queued_bytes >= self.max_queued_bytes
 
     @property
     def queued_bytes(self) -> int:
+        """Bytes of frames queued across every volume and not yet fused."""
         return self._queued_bytes
 
     # The worker ------------------------------------------------------------------------------

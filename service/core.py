@@ -76,18 +76,23 @@ class PlanningService:
 
     # Sessions -----------------------------------------------------------------------------
     def create_session(self, spec: SessionCreate) -> SessionInfo:
+        """Open a session (``SessionExists`` for a taken id, ``CapacityExceeded`` when every one is busy)."""
         return self.sessions.create(spec).info(self.sessions.ttl_s)
 
     def session_info(self, session_id: str) -> SessionInfo:
+        """A session's state; ``SessionNotFound`` once it is gone or expired."""
         return self.sessions.info(session_id)
 
     def list_sessions(self) -> list[SessionInfo]:
+        """Every live session, the expired ones dropped first."""
         return self.sessions.list()
 
     def delete_session(self, session_id: str) -> None:
+        """Drop a session and free its volumes now; a request still holding it finishes on its own copy."""
         self.sessions.delete(session_id)
 
     def reset_session(self, session_id: str) -> SessionInfo:
+        """Empty a session's volumes but keep its workspace and intrinsics, waiting for its current user."""
         with self.sessions.use(session_id) as session:
             session.reset()
             return session.info(self.sessions.ttl_s)
@@ -202,6 +207,7 @@ class PlanningService:
             pass
 
     def model_info(self) -> ModelInfo:
+        """What ``GET /model`` reports: the weights, device, threshold, card and runtime settings."""
         return ModelInfo(
             loaded=self.planner.ready,
             model_id=self.planner.model_id,

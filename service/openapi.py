@@ -19,6 +19,7 @@ def render() -> str:
 
 
 def main() -> None:
+    """Write the document to the path given, or to the repository's ``openapi.json``."""
     path = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT_PATH
     path.write_text(render())
     print(f"wrote {path}")

@@ -58,6 +58,7 @@ def antipodal_config(query: GraspQuery) -> AntipodalConfig:
 
 
 def resolve_device(name: str) -> torch.device:
+    """The torch device named by ``VGN_DEVICE``: ``auto`` takes CUDA when there is one."""
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     return torch.device(name)
@@ -121,7 +122,7 @@ class GraspPlanner:
         source: str | None,
         card: dict[str, Any] | None = None,
         options: InferenceOptions = InferenceOptions(),
-    ):
+    ) -> None:
         self.device = device
         self.model_id = model_id
         self.source = source
@@ -171,10 +172,12 @@ class GraspPlanner:
 
     @property
     def ready(self) -> bool:
+        """Whether weights are loaded, so that ``plan`` can run."""
         return self._network is not None
 
     @property
     def parameters(self) -> int:
+        """The network's parameter count (the architecture fixes it, weights or not)."""
         return PARAMETER_COUNT
 
     def warm_up(self, resolution: int = 40) -> None:
@@ -201,7 +204,9 @@ class GraspPlanner:
             for b in range(len(grids))
         ]
 
-    def plan(self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery):
+    def plan(
+        self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery
+    ) -> tuple[list[Grasp], float]:
         """Grasps for ``grid`` (workspace frame) in the world frame, best first, and the
         time taken in milliseconds; the request's threshold defaults to ``default_threshold``."""
         started = time.perf_counter()

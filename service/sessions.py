@@ -38,6 +38,7 @@ class Session:
     network_output: tuple[int, Any] | None = field(default=None, repr=False)
 
     def reset(self) -> None:
+        """Empty the volume and its counts; a kept network output no longer applies."""
         self.volume.reset()
         self.frame_count = 0
         self.integration_ms = 0.0
@@ -52,6 +53,7 @@ class Session:
         self.network_output = None
 
     def info(self, ttl_s: float) -> SessionInfo:
+        """The session as the API reports it, expiring ``ttl_s`` after its last use."""
         return SessionInfo(
             session_id=self.session_id,
             workspace=self.workspace,
@@ -90,6 +92,8 @@ class SessionStore:
         self._lock = threading.Lock()
 
     def create(self, spec: SessionCreate) -> Session:
+        """Register a new session, dropping expired ones first and
+        evicting the least recently used idle one at the limit."""
         now = self._clock()
         workspace = spec.workspace
         volume = SceneVolume(
@@ -129,15 +133,18 @@ class SessionStore:
                     self._sessions.move_to_end(session_id)
 
     def info(self, session_id: str) -> SessionInfo:
+        """A live session's state; ``SessionNotFound`` for an unknown or expired id."""
         with self._lock:
             return self._live(session_id, self._clock()).info(self.ttl_s)
 
     def list(self) -> list[SessionInfo]:
+        """Every live session, least recently used first, after dropping the expired."""
         with self._lock:
             self._drop_expired(self._clock())
             return [s.info(self.ttl_s) for s in self._sessions.values()]
 
     def delete(self, session_id: str) -> None:
+        """Remove a live session now, even one in use; ``SessionNotFound`` if it is already gone."""
         with self._lock:
             self._live(session_id, self._clock())
             self._remove(session_id)

@@ -110,6 +110,7 @@ class QueuedFrame:
 
     @property
     def nbytes(self) -> int:
+        """Memory the queued depth holds, counted against the fusion worker's byte budget."""
         return self.depth.nbytes
 
 
@@ -145,7 +146,7 @@ class SceneVolume:
     """
 
     def __init__(self, size: float, resolution: int, workspace_pose: np.ndarray, cloud_resolution: int,
-                 max_pending: int = 512, fusion: CloudFusion | None = None):  # fmt: skip
+                 max_pending: int = 512, fusion: CloudFusion | None = None) -> None:  # fmt: skip
         self.max_pending = max_pending
         self.workspace_pose = np.asarray(workspace_pose, dtype=np.float64)
         self._world_to_workspace = invert(self.workspace_pose)
@@ -168,6 +169,7 @@ class SceneVolume:
         return len(self._pending)
 
     def reset(self) -> None:
+        """Start both volumes empty and drop the queued frames; uploads waiting for room go on."""
         with self._lock:
             self.coarse = TSDFVolume(self._size, self._resolution)
             self._fine = None
@@ -181,7 +183,9 @@ class SceneVolume:
             self._drop_pending()
         self._fusion.forget(self)
 
-    def integrate(self, depth: np.ndarray, intrinsics: Intrinsics, camera_pose: np.ndarray, max_depth: float):
+    def integrate(
+        self, depth: np.ndarray, intrinsics: Intrinsics, camera_pose: np.ndarray, max_depth: float
+    ) -> None:
         """Fuse a depth image (metres) taken from ``camera_pose`` (camera → world)."""
         camera_in_workspace = self._world_to_workspace @ camera_pose
         # Everything that could fail runs before the first volume changes.
@@ -225,6 +229,8 @@ class SceneVolume:
 
     # For the worker (service.cloud_fusion.FusionQueue) -----------------------------------------
     def fusion_wanted(self) -> tuple[bool, bool]:
+        """For the worker: (worth fusing in a lull: the cloud was read or the queue got a quarter full,
+        wanted now: an upload waits for room)."""
         with self._lock:
             if not self._pending:
                 self._draining = False
@@ -233,6 +239,7 @@ class SceneVolume:
             return self._cloud_read or self._draining, self._waiting > 0
 
     def fuse_next(self) -> bool:
+        """For the worker: fuse the oldest queued frame; False when the queue is empty."""
         with self._fusing:
             return self._fuse_oldest()
 

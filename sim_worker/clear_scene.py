@@ -18,7 +18,7 @@ from client.http import VGNClient, VGNError
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.metrics import summary_table
-from sim_worker.results import ResultsFolder
+from sim_worker.results import ResultsFolder, RoundRecord
 
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
@@ -33,6 +33,8 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
 
 
 def run(args: argparse.Namespace) -> int:
+    """``vgn-client clear-scene --sim``: rounds of clutter removal,
+    resumed from the results folder; returns the exit status."""
     config = ClutterConfig(
         scene=args.scene,
         objects=args.objects,
@@ -91,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run(config, vgn: VGNClient, results, image_dir) -> dict:
+def _run(config: ClutterConfig, vgn: VGNClient, results: ResultsFolder, image_dir: Path | None) -> dict:
     remaining = config.rounds - len(results.finished_rounds())
     if remaining < config.rounds:
         print(
@@ -105,7 +107,7 @@ def _run(config, vgn: VGNClient, results, image_dir) -> dict:
         bar = None
     episode = ClutterRemoval(config, vgn, results, image_dir)
 
-    def progress(record) -> None:
+    def progress(record: RoundRecord) -> None:
         if bar is not None:
             bar.update(1)
             bar.set_postfix(

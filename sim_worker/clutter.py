@@ -19,7 +19,7 @@ from client.http import VGNClient
 from client.schemas import Grasp
 from sim_worker import images
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, side_view, six_views
-from sim_worker.grasping import execute_grasp
+from sim_worker.grasping import GraspTrial, execute_grasp
 from sim_worker.gripper import Gripper
 from sim_worker.metrics import summarize
 from sim_worker.objects import object_set
@@ -68,10 +68,12 @@ class ClutterConfig:
         check_fraction("threshold", self.threshold, optional=True)
 
     def as_json(self) -> dict:
+        """The settings as stored in the results folder's config.json, which a resume must match."""
         return asdict(self)
 
 
 def camera_views(kind: str) -> list[np.ndarray]:
+    """The camera poses of a round: VGN's six views on a circle, or one side view."""
     if kind == "six":
         return six_views()
     if kind == "side":
@@ -95,6 +97,7 @@ class ClutterRemoval:
         self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
 
     def close(self) -> None:
+        """Delete the service session and close the simulator, even when the first fails."""
         try:
             self.vgn.delete_session(self.session_id)
         finally:
@@ -115,6 +118,8 @@ class ClutterRemoval:
         return summary
 
     def run_round(self, round_id: int) -> RoundRecord:
+        """One round on the scene of (seed, ``round_id``): grasp until the
+        table is clear, no grasp is found, or two grasps in a row fail."""
         started = time.perf_counter()
         rng = np.random.default_rng([self.config.seed, round_id])  # the same scene whenever it runs
         self.camera.rng = rng
@@ -188,7 +193,15 @@ class ClutterRemoval:
         )
 
 
-def _grasp_row(record, grasp: Grasp, trial, integration_ms, planning_ms, client_ms, count) -> dict:
+def _grasp_row(
+    record: RoundRecord,
+    grasp: Grasp,
+    trial: GraspTrial,
+    integration_ms: float,
+    planning_ms: float,
+    client_ms: float,
+    count: int,
+) -> dict:
     qx, qy, qz, qw = grasp.orientation
     x, y, z = grasp.position
     return {

@@ -12,6 +12,7 @@ model trained on the data survives them. Which scenes do is drawn from the seed 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal
 
@@ -39,6 +40,9 @@ DataScene = Literal["pile", "packed"]
 
 @dataclass(frozen=True)
 class DataGenConfig:
+    """Settings of a generate-data run; all but the renderer are recorded in the dataset's generation.json,
+    which a resumed run must match."""
+
     scene: DataScene = "pile"
     objects: tuple[str, ...] = ()  # object set names or URDF folders; () = the scene's default
     seed: int = 0
@@ -122,6 +126,7 @@ class SceneLabeller:
         self.trials = 0
 
     def close(self) -> None:
+        """Delete the service session and close the simulator, even when the first fails."""
         try:
             self.vgn.delete_session(self.session_id)
         finally:
@@ -195,13 +200,18 @@ class SceneLabeller:
 
 
 def dataset_setup() -> DatasetSetup:
+    """The dataset's setup.json: the simulated workspace, camera and gripper."""
     spec = GripperSpec()
     return DatasetSetup(size=WORKSPACE_SIZE, intrinsics=SIM_INTRINSICS, max_opening_width=spec.max_opening,
                         finger_depth=spec.finger_depth)  # fmt: skip
 
 
 def generate(
-    vgn: VGNClient, dataset: RawDataset, config: DataGenConfig, indices: list[int], report=None
+    vgn: VGNClient,
+    dataset: RawDataset,
+    config: DataGenConfig,
+    indices: list[int],
+    report: Callable[[str, int, float], object] | None = None,
 ) -> None:
     """Label the scenes ``indices`` not yet in ``dataset``; ``report(scene_id, grasps, seconds)``
     is called after each scene is stored."""

@@ -14,6 +14,7 @@ import queue
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from client.embedded import EmbeddedService
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
@@ -21,8 +22,18 @@ from sim_worker.gripper import GRIPPER_VERSION
 from vgn_data.dataset import RawDataset
 from vgn_data.files import check_settings
 
+if TYPE_CHECKING:
+    from multiprocessing.queues import Queue
 
-def _worker(url: str, api_key: str | None, out: str, config, indices: list[int], reports) -> None:
+    from tqdm import tqdm
+
+    #: What a worker reports per scene: (scene id, grasps labelled, seconds).
+    Reports = Queue[tuple[str, int, float]]
+
+
+def _worker(
+    url: str, api_key: str | None, out: str, config: DataGenConfig, indices: list[int], reports: Reports
+) -> None:
     """One simulator process: its own PyBullet world and client, its share of the scenes."""
     from client.connect import connect
     from client.lifetime import end_with_parent
@@ -36,6 +47,8 @@ def _worker(url: str, api_key: str | None, out: str, config, indices: list[int],
 
 
 def run(args: argparse.Namespace) -> int:
+    """``vgn-client generate-data --sim``: label the scenes missing from the dataset folder in worker
+    processes (or on Ray); returns the exit status."""
     if (args.workers is not None and args.workers < 1) or args.scenes < 0:
         print("error: --workers must be >= 1 and --scenes >= 0", file=sys.stderr)
         return 2
@@ -90,7 +103,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_workers(url: str, args: argparse.Namespace, config, todo: list[int]) -> tuple[int, float]:
+def _run_workers(
+    url: str, args: argparse.Namespace, config: DataGenConfig, todo: list[int]
+) -> tuple[int, float]:
     context = multiprocessing.get_context("spawn")  # PyBullet and fork do not mix
     reports = context.Queue()
     shares = [todo[w :: args.workers] for w in range(args.workers)]
@@ -125,7 +140,7 @@ def _run_workers(url: str, args: argparse.Namespace, config, todo: list[int]) ->
     return grasps, time.perf_counter() - started
 
 
-def _progress(total: int):
+def _progress(total: int) -> tqdm:
     from tqdm import tqdm
 
     return tqdm(total=total, unit="scene", file=sys.stderr)

@@ -62,10 +62,12 @@ class GraspTrial:
 
     @property
     def label(self) -> int:
+        """The dataset's label: 1 for a success, 0 for every kind of failure."""
         return int(self.outcome is Outcome.SUCCESS)
 
 
 def translated(pose: np.ndarray, offset_in_pose_frame: np.ndarray) -> np.ndarray:
+    """``pose`` moved by ``offset_in_pose_frame``, given along the pose's own axes."""
     moved = pose.copy()
     moved[:3, 3] = pose[:3, 3] + pose[:3, :3] @ np.asarray(offset_in_pose_frame, dtype=np.float64)
     return moved

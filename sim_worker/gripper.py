@@ -98,17 +98,19 @@ class Gripper:
             )
 
     def park(self) -> None:
+        """Move the hand out of the scene, so it neither shows in renders nor touches objects."""
         pose = np.eye(4)
         pose[:3, 3] = PARKED_POSITION
         self.reset(pose)
 
-    def _hold(self, position, orientation) -> None:
+    def _hold(self, position: np.ndarray, orientation: np.ndarray) -> None:
         self.world.p.changeConstraint(
             self.constraint, position, jointChildFrameOrientation=orientation, maxForce=self.spec.hold_force
         )
 
     # State --------------------------------------------------------------------------------
     def pose(self) -> np.ndarray:
+        """The hand's grasp frame now, 4×4 world."""
         position, orientation = self.world.p.getBasePositionAndOrientation(self.body)
         from client.geometry import matrix_from_pose
 
@@ -160,7 +162,9 @@ class Gripper:
                 return True
         return False
 
-    def _back_off(self, start: np.ndarray, goal: np.ndarray, n: int, count: int, orientation) -> None:
+    def _back_off(
+        self, start: np.ndarray, goal: np.ndarray, n: int, count: int, orientation: np.ndarray
+    ) -> None:
         """A guarded move's stop: the arm backs off along its path, a waypoint at a time and at
         most ``MAX_BACK_OFF_STEPS``, until the hand no longer presses on anything, and holds
         there, as a robot's contact-triggered stop does. Pressing on with the full holding

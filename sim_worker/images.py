@@ -20,6 +20,7 @@ SHEET_COLUMNS = 4
 
 
 def attempt_image_name(round_id: int, attempt: int) -> str:
+    """The PNG of one attempt, named so that a folder lists in round and attempt order."""
     return f"round{round_id:04d}_attempt{attempt:02d}.png"
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 
 def is_held_out(name: str, fraction: float) -> bool:
+    """Whether the object called ``name`` falls in the held-out ``fraction``, by a hash of the name alone."""
     bucket = int.from_bytes(hashlib.sha256(name.encode()).digest()[:4], "big") / 2**32
     return bucket < fraction
 
@@ -39,6 +40,7 @@ def split_objects(source: Path, destination: Path, fraction: float) -> tuple[int
 
 
 def main() -> None:
+    """Split the folder given on the command line and print the counts."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

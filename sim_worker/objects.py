@@ -23,10 +23,14 @@ import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from vgn_data.files import write_atomically
+
+if TYPE_CHECKING:
+    from pybullet_utils.bullet_client import BulletClient
 
 #: VGN's global scale for its block set (``{"blocks": 1.67}`` in its simulation).
 BLOCKS_SCALE = 1.67
@@ -143,6 +147,8 @@ class Prism:
 
 @dataclass(frozen=True)
 class Block:
+    """A procedural block: its parts (boxes, or one cylinder or prism) and colour, before scaling."""
+
     name: str
     parts: tuple[Box, ...] | Cylinder | Prism
     rgba: tuple[float, float, float, float]
@@ -189,7 +195,9 @@ def _prism_mesh(prism: Prism) -> tuple[np.ndarray, np.ndarray]:
     return vertices, np.asarray(faces)
 
 
-def mesh_mass_properties(vertices: np.ndarray, faces: np.ndarray, density: float):
+def mesh_mass_properties(
+    vertices: np.ndarray, faces: np.ndarray, density: float
+) -> tuple[float, np.ndarray, np.ndarray]:
     """Mass, centre of mass (3,) and inertia tensor (3, 3) about the centre of mass of a
     closed, outward-oriented triangle mesh (sum of signed tetrahedra from the origin)."""
     canonical = np.array([[2.0, 1.0, 1.0], [1.0, 2.0, 1.0], [1.0, 1.0, 2.0]]) / 120.0
@@ -355,7 +363,7 @@ class VettedObject:
     reason: str | None = None
 
 
-def _measure(p, path: Path) -> tuple[tuple[float, float, float] | None, float, str | None]:
+def _measure(p: BulletClient, path: Path) -> tuple[tuple[float, float, float] | None, float, str | None]:
     """AABB extents and mass of a URDF loaded at scale 1, or the reason it is unusable."""
     try:
         body = p.loadURDF(str(path))

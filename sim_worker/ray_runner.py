@@ -18,7 +18,18 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import argparse
+
+    from tqdm import tqdm
+
+    from sim_worker.clutter import ClutterConfig
+    from sim_worker.datagen import DataGenConfig
+    from sim_worker.results import ResultsFolder, RoundRecord
+    from vgn_data.dataset import RawDataset
 
 #: How often Ray restarts a dead worker, and retries the item it held, before the run gives up.
 WORKER_RESTARTS = 4
@@ -31,7 +42,8 @@ class RayMissing(RuntimeError):
     """``--ray`` without the ray extra installed."""
 
 
-def import_ray():
+def import_ray() -> ModuleType:
+    """The ``ray`` module, imported only when ``--ray`` is used; ``RayMissing`` says how to install it."""
     try:
         import ray
     except ImportError as error:
@@ -74,6 +86,7 @@ def _auth_token_available() -> bool:
 
 
 def cluster_cpus() -> int:
+    """CPUs of the cluster (at least 1): the default worker count."""
     return max(1, int(import_ray().cluster_resources().get("CPU", 1)))
 
 
@@ -98,9 +111,11 @@ class ServiceHost:
         self.service = EmbeddedService(**service_options).start()
 
     def url(self) -> str:
+        """Where this node's workers reach the service."""
         return self.service.url
 
     def stop(self) -> None:
+        """Stop this node's service at the end of the run."""
         self.service.stop()
 
 
@@ -120,7 +135,7 @@ class SimWorker:
         self.labellers: dict[Any, Any] = {}
         self.episodes: dict[Any, Any] = {}
 
-    def _node_service_url(self, ray, service_options: dict) -> str:
+    def _node_service_url(self, ray: ModuleType, service_options: dict) -> str:
         """The service of this node, or an own one where the driver started none (a node
         that joined after the run began)."""
         node_id = ray.get_runtime_context().get_node_id()
@@ -133,7 +148,8 @@ class SimWorker:
             return self.own_service.url
         return ray.get(host.url.remote())
 
-    def label_scene(self, config, index: int) -> SceneResult:
+    def label_scene(self, config: DataGenConfig, index: int) -> SceneResult:
+        """Label scene ``index`` in this worker's world for ``config`` (one world per distinct config)."""
         from sim_worker.datagen import SceneLabeller
 
         if config not in self.labellers:
@@ -146,14 +162,15 @@ class SimWorker:
         views, rows = labelled
         return SceneResult(index, views.depth, views.camera_poses, rows, seconds, self.node)
 
-    def prepare_clutter(self, config, resolve: Callable) -> tuple[bool, str, Any]:
+    def prepare_clutter(self, config: ClutterConfig, resolve: Callable) -> tuple[bool, str, Any]:
         """(service ready, its detail, ``config`` with the planner resolved by ``resolve``)."""
         readiness = self.vgn.ready()
         if not readiness.ready and config.planner == "vgn":
             return False, str(readiness.detail), config  # without weights there is nothing to resolve
         return readiness.ready, str(readiness.detail), resolve(config, self.vgn)
 
-    def clutter_round(self, config, round_id: int):
+    def clutter_round(self, config: ClutterConfig, round_id: int) -> tuple[RoundRecord, str]:
+        """Run one round for ``config`` (one world per distinct config); the record and this worker's node."""
         from sim_worker.clutter import ClutterRemoval
 
         if config not in self.episodes:
@@ -162,6 +179,7 @@ class SimWorker:
         return record, self.node
 
     def pid(self) -> int:
+        """The worker process's id, to find or signal a worker from outside Ray."""
         return os.getpid()
 
 
@@ -224,10 +242,12 @@ class WorkerPool:
                 yield finished.pop(next_out)
                 next_out += 1
 
-    def call_one(self, method: str, *args) -> Any:
+    def call_one(self, method: str, *args: Any) -> Any:
+        """``method(*args)`` on the first worker, waiting for its answer."""
         return self.ray.get(getattr(self.workers[0], method).remote(*args))
 
     def close(self) -> None:
+        """Stop the node services and kill every actor; a failure to stop is reported, not raised."""
         try:
             self.ray.get([host.stop.remote() for host in self.hosts], timeout=30)
         except Exception as error:  # a service that is already gone need not be stopped
@@ -236,7 +256,7 @@ class WorkerPool:
             self.ray.kill(actor)
 
 
-def _progress(total: int, unit: str):
+def _progress(total: int, unit: str) -> tqdm:
     from tqdm import tqdm
 
     return tqdm(total=total, unit=unit, file=sys.stderr)
@@ -245,10 +265,11 @@ def _progress(total: int, unit: str):
 class RoundProgress:
     """Updates a progress bar per finished round with the grasps attempted per second."""
 
-    def __init__(self, bar) -> None:
+    def __init__(self, bar: tqdm) -> None:
         self.bar, self.attempts, self.started = bar, 0, time.perf_counter()
 
-    def __call__(self, record) -> None:
+    def __call__(self, record: RoundRecord) -> None:
+        """Count one finished round and show the attempt rate and its successes."""
         self.attempts += record.attempts
         self.bar.update(1)
         rate = self.attempts / (time.perf_counter() - self.started)
@@ -262,7 +283,9 @@ def _node_split(nodes: Iterable[str]) -> str:
     return ", ".join(f"{node}: {count}" for node, count in sorted(counts.items()))
 
 
-def generate_on_ray(args, config, dataset, todo: list[int]) -> int:
+def generate_on_ray(
+    args: argparse.Namespace, config: DataGenConfig, dataset: RawDataset, todo: list[int]
+) -> int:
     """``generate-data --sim --ray``: label scenes ``todo`` on Ray workers into ``dataset``."""
     from sim_worker.datagen import scene_id
     from vgn_data.dataset import SceneViews
@@ -317,11 +340,11 @@ class ClutterPool:
         connect(address)
         self.pool = WorkerPool(workers, url, api_key, service_options)
 
-    def prepare(self, config, resolve: Callable) -> tuple[bool, str, Any]:
+    def prepare(self, config: ClutterConfig, resolve: Callable) -> tuple[bool, str, Any]:
         """(service ready, detail, config with its planner resolved), asked of one worker."""
         return self.pool.call_one("prepare_clutter", config, resolve)
 
-    def run(self, config, results, progress: Callable | None = None) -> dict:
+    def run(self, config: ClutterConfig, results: ResultsFolder, progress: Callable | None = None) -> dict:
         """Run the rounds of ``config`` not yet in ``results``; the summary over all of them
         (as ClutterRemoval.run, whose single-process results these equal)."""
         from sim_worker.metrics import summarize
@@ -339,10 +362,13 @@ class ClutterPool:
         return summary
 
     def close(self) -> None:
+        """Stop the workers and node services."""
         self.pool.close()
 
 
-def clear_scene_on_ray(args, config, results_dir, resolve: Callable) -> int:
+def clear_scene_on_ray(
+    args: argparse.Namespace, config: ClutterConfig, results_dir: Path, resolve: Callable
+) -> int:
     """``clear-scene --sim --ray``: rounds on Ray workers; ``resolve`` fills in the planner."""
     from sim_worker.metrics import summary_table
     from sim_worker.results import ResultsFolder

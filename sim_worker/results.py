@@ -50,6 +50,9 @@ GRASP_COLUMNS = [
 
 @dataclass
 class RoundRecord:
+    """One clutter-removal round: its scene, how many objects it started with and cleared, its attempts and
+    successes, and a row per grasp."""
+
     round_id: int
     scene_id: str
     object_count: int
@@ -88,6 +91,7 @@ class ResultsFolder:
         self.grasps = [row for row in _read_csv(self.path / "grasps.csv") if row["round_id"] in finished]
 
     def finished_rounds(self) -> set[int]:
+        """Round ids already committed: a resumed run skips them."""
         return {int(row["round_id"]) for row in self.rounds}
 
     def commit(self, record: RoundRecord) -> None:
@@ -99,4 +103,5 @@ class ResultsFolder:
         write_atomically(self.path / "rounds.csv", _csv_text(ROUND_COLUMNS, self.rounds))
 
     def write_summary(self, summary: dict[str, Any]) -> None:
+        """Replace summary.json (atomically) with the summary over every finished round."""
         write_atomically(self.path / "summary.json", json.dumps(summary, indent=2) + "\n")

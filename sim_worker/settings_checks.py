@@ -16,6 +16,7 @@ def check_choice(name: str, value: Any, allowed: Any) -> None:
 
 
 def check_at_least(name: str, value: int, minimum: int) -> None:
+    """``value`` must be an integer (not a bool) of at least ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
 

@@ -7,6 +7,7 @@ import logging
 import os
 import pkgutil
 import sys
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -25,7 +26,7 @@ Renderer = Literal["auto", "egl", "tiny"]
 
 
 @contextlib.contextmanager
-def _quiet_native_stdout():
+def _quiet_native_stdout() -> Iterator[None]:
     """Silence what PyBullet's C code prints (the EGL plugin lists GL details on load and exit)."""
     sys.stdout.flush()
     try:
@@ -58,6 +59,8 @@ class PhysicsConfig:
 
 @dataclass
 class SimObject:
+    """An object in the world: its body id, the URDF it came from and its scale."""
+
     body: int
     urdf: Path
     scale: float
@@ -124,7 +127,13 @@ class World:
         return table
 
     # Objects ------------------------------------------------------------------------------
-    def add_object(self, urdf: Path, position, orientation=(0.0, 0.0, 0.0, 1.0), scale: float = 1.0) -> int:
+    def add_object(
+        self,
+        urdf: Path,
+        position: Sequence[float] | np.ndarray,
+        orientation: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0, 1.0),
+        scale: float = 1.0,
+    ) -> int:
         """Load an object URDF at a pose ([x, y, z], [x, y, z, w]) with a uniform scale."""
         body = self.p.loadURDF(str(urdf), list(position), list(orientation), globalScaling=scale)
         self.p.changeDynamics(body, -1, lateralFriction=self.config.object_friction)
@@ -137,24 +146,29 @@ class World:
             self.remove_object(body)
 
     def remove_object(self, body: int) -> None:
+        """Take one object out of the world and out of ``objects``."""
         self.p.removeBody(body)
         del self.objects[body]
 
     def object_pose(self, body: int) -> tuple[np.ndarray, np.ndarray]:
+        """Position (3,) and quaternion [x, y, z, w] (4,) of a body's base, world frame."""
         position, orientation = self.p.getBasePositionAndOrientation(body)
         return np.asarray(position), np.asarray(orientation)
 
     def aabb(self, body: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper corners of a body's axis-aligned bounding box, world frame."""
         lower, upper = self.p.getAABB(body)
         return np.asarray(lower), np.asarray(upper)
 
     # Physics ------------------------------------------------------------------------------
     def step(self, count: int = 1) -> None:
+        """Advance physics by ``count`` fixed time steps, keeping ``sim_time``."""
         for _ in range(count):
             self.p.stepSimulation()
         self.sim_time += count * self.config.timestep
 
     def at_rest(self) -> bool:
+        """Whether every object moves slower than ``rest_speed``, linearly and angularly."""
         for body in self.objects:
             linear, angular = self.p.getBaseVelocity(body)
             if max(np.abs(linear).max(), np.abs(angular).max()) > self.config.rest_speed:
@@ -170,7 +184,9 @@ class World:
                 return True
         return False
 
-    def remove_objects_outside(self, lower=(0.0, 0.0, 0.0), upper=(WORKSPACE_SIZE,) * 3) -> list[int]:
+    def remove_objects_outside(
+        self, lower: Sequence[float] = (0.0, 0.0, 0.0), upper: Sequence[float] = (WORKSPACE_SIZE,) * 3
+    ) -> list[int]:
         """Remove objects whose centre left the workspace cube (fallen off, flung away)."""
         removed = []
         for body in list(self.objects):
@@ -181,15 +197,19 @@ class World:
         return removed
 
     def save_state(self) -> int:
+        """Snapshot the simulation in memory; the id is for ``restore_state`` and ``discard_state``."""
         return self.p.saveState()
 
     def restore_state(self, state: int) -> None:
+        """Return to a snapshot, e.g. to try another grasp on the same scene."""
         self.p.restoreState(stateId=state)
 
     def discard_state(self, state: int) -> None:
+        """Free a snapshot no longer needed (each holds a copy of the world)."""
         self.p.removeState(state)
 
     def close(self) -> None:
+        """Disconnect from PyBullet, silencing what its native code prints on the way out."""
         with _quiet_native_stdout():
             self.p.disconnect()
 

@@ -16,8 +16,10 @@ import csv
 import io
 import json
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -30,6 +32,8 @@ GRASP_COLUMNS = ["scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "la
 
 @dataclass(frozen=True)
 class DatasetSetup:
+    """The dataset's setup.json: workspace size, camera intrinsics and gripper dimensions, in VGN's layout."""
+
     size: float = 0.30
     intrinsics: Intrinsics = field(
         default_factory=lambda: Intrinsics(width=640, height=480, fx=540.0, fy=540.0, cx=320.0, cy=240.0)
@@ -38,6 +42,7 @@ class DatasetSetup:
     finger_depth: float = 0.05
 
     def to_json(self) -> dict:
+        """The content of setup.json, intrinsics as VGN writes them (a flattened 3×3 ``K``)."""
         i = self.intrinsics
         return {
             "size": self.size,
@@ -52,6 +57,7 @@ class DatasetSetup:
 
     @classmethod
     def from_json(cls, data: dict) -> DatasetSetup:
+        """The setup read back from the content of setup.json."""
         k = data["intrinsic"]["K"]
         intrinsics = Intrinsics(width=data["intrinsic"]["width"], height=data["intrinsic"]["height"],
                                 fx=k[0], fy=k[4], cx=k[2], cy=k[5])  # fmt: skip
@@ -76,6 +82,7 @@ class SceneViews:
 
     @classmethod
     def from_extrinsics(cls, depth: np.ndarray, extrinsics: np.ndarray) -> SceneViews:
+        """Views from a scene file's depth images and VGN's stored world → camera extrinsics."""
         poses = [invert(matrix_from_pose(row[4:7], row[0:4])) for row in np.asarray(extrinsics)]
         return cls(np.asarray(depth, dtype=np.float32), np.asarray(poses).reshape(-1, 4, 4))
 
@@ -99,7 +106,7 @@ def _whole_scenes(text: str) -> str:
     return "".join(lines)
 
 
-def _heal_torn_tail(stream) -> None:
+def _heal_torn_tail(stream: TextIO) -> None:
     """Cut an unfinished last line and the rows of the scene it belonged to from the file."""
     stream.seek(0)
     text = stream.read()
@@ -110,7 +117,7 @@ def _heal_torn_tail(stream) -> None:
         stream.write(whole)
 
 
-def _csv_lines(scene_ids, rows: np.ndarray) -> str:
+def _csv_lines(scene_ids: Iterable[str], rows: np.ndarray) -> str:
     """grasps.csv lines for rows (qx, qy, qz, qw, x, y, z, width, label)."""
     return "".join(
         f"{sid}," + ",".join(f"{v:.6f}" for v in row[:8]) + f",{int(row[8])}\n"
@@ -212,6 +219,7 @@ class RawDataset:
         return sorted({row[0] for row in self._rows()})
 
     def read_scene(self, scene_id: str) -> SceneViews:
+        """The depth images and camera poses of one scene file."""
         with np.load(self.scenes_dir / f"{scene_id}.npz") as data:
             return SceneViews.from_extrinsics(data["depth_imgs"], data["extrinsics"])
 

@@ -37,6 +37,7 @@ PLANNERS = {"vgn": pb.PLANNER_VGN, "antipodal": pb.PLANNER_ANTIPODAL}
 
 # protobuf -> dicts the schemas validate ------------------------------------------------------
 def vector(message: pb.Vector3) -> list[float]:
+    """``[x, y, z]`` of a message vector."""
     return [message.x, message.y, message.z]
 
 
@@ -46,6 +47,7 @@ def vector_text(message: pb.Vector3) -> str:
 
 
 def pose_dict(message: pb.Pose) -> dict[str, Any]:
+    """A ``Pose`` dict holding only the parts the message sets, so missing ones take the schema defaults."""
     data: dict[str, Any] = {}
     if message.HasField("position"):
         data["position"] = vector(message.position)
@@ -56,6 +58,7 @@ def pose_dict(message: pb.Pose) -> dict[str, Any]:
 
 
 def intrinsics_dict(message: pb.Intrinsics) -> dict[str, Any]:
+    """An ``Intrinsics`` dict; the schema refuses the zeros of fields left unset."""
     return {name: getattr(message, name) for name in ("width", "height", "fx", "fy", "cx", "cy")}
 
 
@@ -65,6 +68,7 @@ def optional_fields(message: Any, names: tuple[str, ...]) -> dict[str, Any]:
 
 
 def workspace_dict(message: pb.Workspace) -> dict[str, Any]:
+    """A ``Workspace`` dict of the fields the message sets."""
     data = optional_fields(message, ("size", "resolution"))
     if message.HasField("pose"):
         data["pose"] = pose_dict(message.pose)
@@ -72,6 +76,7 @@ def workspace_dict(message: pb.Workspace) -> dict[str, Any]:
 
 
 def session_create_dict(message: pb.CreateSessionRequest) -> dict[str, Any]:
+    """A ``SessionCreate`` dict of the fields the request sets."""
     data = optional_fields(message, ("session_id",))
     if message.HasField("workspace"):
         data["workspace"] = workspace_dict(message.workspace)
@@ -81,6 +86,7 @@ def session_create_dict(message: pb.CreateSessionRequest) -> dict[str, Any]:
 
 
 def frame_meta_dict(message: pb.Frame) -> dict[str, Any]:
+    """A ``FrameMeta`` dict of the fields the frame sets (the depth bytes travel apart)."""
     data = optional_fields(message, ("depth_scale", "max_depth"))
     if message.HasField("camera_pose"):
         data["camera_pose"] = pose_dict(message.camera_pose)
@@ -90,6 +96,8 @@ def frame_meta_dict(message: pb.Frame) -> dict[str, Any]:
 
 
 def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
+    """A ``GraspQuery`` dict with vectors as 'x,y,z' text, so the HTTP rules apply; an unknown planner is
+    passed on for the schema to refuse."""
     data = optional_fields(message, ("threshold", "max_grasps", "nms_size", "max_approach_angle"))
     data["planner"] = PLANNER_NAMES.get(message.planner, f"unknown planner {message.planner}")
     for name in ("crop_min", "crop_max", "approach"):
@@ -100,30 +108,36 @@ def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
 
 # schemas -> protobuf ------------------------------------------------------------------------
 def vector3(values: list[float] | tuple[float, ...]) -> pb.Vector3:
+    """A message vector of three numbers."""
     x, y, z = values
     return pb.Vector3(x=x, y=y, z=z)
 
 
 def quaternion(values: list[float]) -> pb.Quaternion:
+    """A message quaternion of ``[x, y, z, w]``."""
     x, y, z, w = values
     return pb.Quaternion(x=x, y=y, z=z, w=w)
 
 
 def pose_message(pose: Pose) -> pb.Pose:
+    """A validated ``Pose`` as a message."""
     return pb.Pose(position=vector3(pose.position), orientation=quaternion(pose.orientation))
 
 
 def intrinsics_message(intrinsics: Intrinsics | None) -> pb.Intrinsics | None:
+    """``Intrinsics`` as a message; ``None`` leaves the field unset."""
     return None if intrinsics is None else pb.Intrinsics(**intrinsics.model_dump())
 
 
 def workspace_message(workspace: Workspace) -> pb.Workspace:
+    """A ``Workspace`` as a message, every field set."""
     return pb.Workspace(
         size=workspace.size, resolution=workspace.resolution, pose=pose_message(workspace.pose)
     )
 
 
 def session_message(info: SessionInfo) -> pb.Session:
+    """The service's ``SessionInfo`` as a reply."""
     return pb.Session(
         session_id=info.session_id,
         workspace=workspace_message(info.workspace),
@@ -137,10 +151,12 @@ def session_message(info: SessionInfo) -> pb.Session:
 
 
 def frame_result_message(result: FrameResult) -> pb.FrameResult:
+    """The service's ``FrameResult`` as a reply."""
     return pb.FrameResult(**result.model_dump())
 
 
 def grasp_result_message(result: GraspResult) -> pb.GraspResult:
+    """The service's ``GraspResult`` as a reply."""
     grasps = [
         pb.Grasp(
             position=vector3(g.position),
@@ -155,6 +171,7 @@ def grasp_result_message(result: GraspResult) -> pb.GraspResult:
 
 
 def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
+    """A validated ``GraspQuery`` as the request for ``session_id``; unset options stay unset."""
     message = pb.GraspQuery(session_id=session_id, planner=PLANNERS[query.planner])
     for name in ("threshold", "max_grasps", "max_approach_angle"):
         if getattr(query, name) is not None:
@@ -172,6 +189,7 @@ def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
 
 
 def model_info_message(info: ModelInfo) -> pb.ModelInfo:
+    """The service's ``ModelInfo`` as a reply; the free-form card and runtime travel as JSON text."""
     data = info.model_dump(exclude={"card", "runtime"}, exclude_none=True)
     card_json = None if info.card is None else json.dumps(info.card)
     runtime_json = None if info.runtime is None else json.dumps(info.runtime)
@@ -179,11 +197,13 @@ def model_info_message(info: ModelInfo) -> pb.ModelInfo:
 
 
 def array_bytes(array: np.ndarray) -> bytes:
+    """An array as little-endian float32 bytes, the encoding of grids and clouds."""
     return np.ascontiguousarray(array, dtype="<f4").tobytes()
 
 
 # protobuf -> schemas (the client's answers) -------------------------------------------------
 def session_info(message: pb.Session) -> SessionInfo:
+    """A ``Session`` reply as the client's ``SessionInfo``."""
     return SessionInfo(
         session_id=message.session_id,
         workspace=Workspace.model_validate(workspace_dict(message.workspace)),
@@ -197,18 +217,21 @@ def session_info(message: pb.Session) -> SessionInfo:
 
 
 def session_list(message: pb.ListSessionsResponse) -> SessionList:
+    """A ``ListSessions`` reply as the client's ``SessionList``."""
     return SessionList(
         sessions=[session_info(s) for s in message.sessions], max_sessions=message.max_sessions
     )
 
 
 def frame_result(message: pb.FrameResult) -> FrameResult:
+    """A ``FrameResult`` reply as the client's model."""
     return FrameResult(
         session_id=message.session_id, frame_count=message.frame_count, integration_ms=message.integration_ms
     )
 
 
 def grasp_result(message: pb.GraspResult) -> GraspResult:
+    """A ``GraspResult`` reply as the client's model, validated like an HTTP answer."""
     grasps = [
         {
             "position": vector(g.position),
@@ -230,6 +253,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
 
 
 def model_info(message: pb.ModelInfo) -> ModelInfo:
+    """A ``ModelInfo`` reply as the client's model, card and runtime decoded from JSON."""
     data = optional_fields(message, ("model_id", "source", "detail"))
     return ModelInfo(
         loaded=message.loaded,

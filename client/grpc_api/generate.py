@@ -44,6 +44,7 @@ def generate(out_dir: Path = PACKAGE_DIR, proto_root: Path = PROTO_ROOT) -> list
 
 
 def main() -> None:
+    """Regenerate the stubs into the directory given (default: this package) and list what was written."""
     out_dir = Path(sys.argv[1]) if len(sys.argv) > 1 else PACKAGE_DIR
     for path in generate(out_dir):
         print(f"wrote {path}")

@@ -45,6 +45,8 @@ def field_errors(errors: list) -> tuple[list[dict], str]:
 
 
 def validation_response(errors: list, prefix: tuple[str, ...] = ()) -> JSONResponse:
+    """The 422 answer for pydantic field errors; ``prefix``
+    roots their locations (e.g. in the ``meta`` part)."""
     cleaned, summary = field_errors([{**e, "loc": (*prefix, *e.get("loc", ()))} for e in errors])
     return JSONResponse(status_code=422, content={"detail": cleaned, "message": summary})
 
@@ -66,6 +68,9 @@ def allowed_methods(request: Request) -> list[str]:
 
 
 def install_error_handlers(app: FastAPI) -> None:
+    """Map every error to a JSON answer: service errors to their
+    status, validation to 422, the unexpected to a logged 500."""
+
     @app.exception_handler(ServiceError)
     async def _service_error(_: Request, error: ServiceError) -> JSONResponse:
         status = next((code for kind, code in STATUS_OF.items() if isinstance(error, kind)), 400)

@@ -17,6 +17,7 @@ class BodyTooLarge(HTTPException):
 
 
 def too_large_message(size: int, limit: int) -> str:
+    """The 413 detail, the same whether the size was declared or counted."""
     return f"request body of {size}+ bytes exceeds the limit of {limit} bytes (VGN_MAX_FRAME_BYTES)"
 
 
@@ -29,6 +30,7 @@ class BodySizeLimit:
         self.max_bytes = max_bytes
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Check the declared length up front, then count the body as the app reads it."""
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return

@@ -6,12 +6,14 @@ import time
 
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram, generate_latest
 from starlette.requests import Request
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 LATENCY_BUCKETS = (0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0)
 
 
 class ServiceMetrics:
+    """The app's counters, histograms and gauges, in a registry of its own."""
+
     def __init__(self) -> None:
         self.registry = CollectorRegistry()
         self.requests = Counter(
@@ -44,6 +46,7 @@ class ServiceMetrics:
         self.model_loaded = Gauge("vgn_model_loaded", "1 when a model is loaded", registry=self.registry)
 
     def render(self) -> bytes:
+        """The registry in the Prometheus text format, for ``GET /metrics``."""
         return generate_latest(self.registry)
 
 
@@ -56,13 +59,14 @@ class RequestMetrics:
         self.metrics = metrics
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Time the request and count it under its route and status, a failed one as 500."""
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
         started = time.perf_counter()
         status = 500
 
-        async def recording_send(message) -> None:
+        async def recording_send(message: Message) -> None:
             nonlocal status
             if message["type"] == "http.response.start":
                 status = message["status"]

@@ -9,8 +9,9 @@ from typing import Annotated
 import numpy as np
 from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 from pydantic import ValidationError
-from starlette.datastructures import UploadFile
+from starlette.datastructures import FormData, UploadFile
 from starlette.formparsers import MultiPartException
 
 from client.schemas import (
@@ -39,10 +40,12 @@ PLY_MEDIA_TYPE = "application/x-ply"
 
 
 def core(request: Request) -> PlanningService:
+    """The app's planning core, as a FastAPI dependency."""
     return request.app.state.core
 
 
 def metrics(request: Request) -> ServiceMetrics:
+    """The app's Prometheus metrics, for routes that record their own figures."""
     return request.app.state.metrics
 
 
@@ -123,16 +126,19 @@ def create_session(service: Core, spec: SessionCreate | None = None) -> SessionI
 
 @api.get("/sessions", response_model=SessionList)
 def list_sessions(service: Core) -> SessionList:
+    """Every live session, and how many the service keeps at most."""
     return SessionList(sessions=service.list_sessions(), max_sessions=service.sessions.max_sessions)
 
 
 @api.get("/sessions/{session_id}", response_model=SessionInfo)
 def get_session(service: Core, session_id: str) -> SessionInfo:
+    """One session's workspace, intrinsics, frame count and expiry; 404 once it is gone."""
     return service.session_info(session_id)
 
 
 @api.delete("/sessions/{session_id}", status_code=204, response_class=Response)
 def delete_session(service: Core, session_id: str) -> Response:
+    """Drop the session and free its volumes."""
     service.delete_session(session_id)
     return Response(status_code=204)
 
@@ -203,7 +209,7 @@ FRAME_BODY = {
 
 
 @api.post("/sessions/{session_id}/frames", response_model=FrameResult, openapi_extra=FRAME_BODY)
-async def add_frame(service: Core, session_id: str, request: Request):
+async def add_frame(service: Core, session_id: str, request: Request) -> FrameResult | JSONResponse:
     """Fuse one depth frame: multipart parts ``meta`` (JSON) and ``depth`` (a file part), or
     the depth image as the whole body (``application/octet-stream`` float32 or ``image/png``)
     with the meta JSON in the ``X-Frame-Meta`` header, which saves the multipart round."""
@@ -262,7 +268,7 @@ def grasps(
     return result
 
 
-async def _frame_parts(form) -> tuple[str | bytes, bytes, str]:
+async def _frame_parts(form: FormData) -> tuple[str | bytes, bytes, str]:
     """The meta JSON, the depth bytes and the depth media type of a frame upload."""
     meta_part, depth_part = form.get("meta"), form.get("depth")
     missing = [name for name, part in (("meta", meta_part), ("depth", depth_part)) if part is None]
@@ -296,7 +302,7 @@ def tsdf(service: Core, session_id: str) -> Response:
 def cloud(service: Core, session_id: str, request: Request) -> Response:
     """Surface points and outward normals in the world frame: ``.npy`` (M, 6) float32 by
     default, binary PLY with ``Accept: application/x-ply``; 406 for an ``Accept`` naming neither.
-    (``Accept`` is negotiated through the response media types, not declared as a parameter.)"""
+    ``Accept`` is negotiated through the response media types, not declared as a parameter."""
     accept = request.headers.get("accept")
     wanted = (accept or "*/*").lower()
     if PLY_MEDIA_TYPE in wanted:

@@ -77,7 +77,7 @@ class AntipodalConfig:
 
 def plan_antipodal(
     cloud: np.ndarray, workspace_pose: np.ndarray, config: AntipodalConfig = AntipodalConfig()
-):
+) -> list[Grasp]:
     """Antipodal grasps on ``cloud`` ((M, 6) world points + outward unit normals), best first.
 
     ``workspace_pose`` (4×4 workspace → world) only serves the crop box.
@@ -121,7 +121,14 @@ def plan_antipodal(
     ]
 
 
-def _grasps_at_seed(points, normals, tree, seed, floor, config: AntipodalConfig):
+def _grasps_at_seed(
+    points: np.ndarray,
+    normals: np.ndarray,
+    tree: cKDTree,
+    seed: int,
+    floor: float,
+    config: AntipodalConfig,
+) -> list[tuple[float, np.ndarray, np.ndarray, float]]:
     """The best valid depth for each approach direction around one seed."""
     origin, y = points[seed], normals[seed]
     cos_cone = math.cos(config.friction_angle)
@@ -192,10 +199,25 @@ def _grasps_at_seed(points, normals, tree, seed, floor, config: AntipodalConfig)
     return results
 
 
-def _lowest_z(origin, x_axis, y_axis, z_axis, centre, half, tips):
+def _lowest_z(
+    origin: np.ndarray,
+    x_axis: np.ndarray,
+    y_axis: np.ndarray,
+    z_axis: np.ndarray,
+    centre: np.ndarray,
+    half: np.ndarray,
+    tips: np.ndarray,
+) -> np.ndarray:
     """World z of the lowest corner of the fingers and palm, per depth (all arrays (D,))."""
 
-    def box_min(x_lo, x_hi, y_lo, y_hi, z_lo, z_hi):
+    def box_min(
+        x_lo: float | np.ndarray,
+        x_hi: float | np.ndarray,
+        y_lo: float | np.ndarray,
+        y_hi: float | np.ndarray,
+        z_lo: float | np.ndarray,
+        z_hi: float | np.ndarray,
+    ) -> np.ndarray:
         return (
             np.minimum(x_lo * x_axis[2], x_hi * x_axis[2])
             + np.minimum(y_lo * y_axis[2], y_hi * y_axis[2])
@@ -215,7 +237,13 @@ def _lowest_z(origin, x_axis, y_axis, z_axis, centre, half, tips):
     return origin[2] + np.minimum(np.minimum(hi_finger, lo_finger), palm)
 
 
-def _filters(quality, positions, rotations, workspace_pose, config: AntipodalConfig) -> np.ndarray:
+def _filters(
+    quality: np.ndarray,
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    workspace_pose: np.ndarray,
+    config: AntipodalConfig,
+) -> np.ndarray:
     keep = quality >= config.threshold
     if config.crop_min is not None or config.crop_max is not None:
         pose = np.asarray(workspace_pose, dtype=np.float64)
@@ -232,7 +260,9 @@ def _filters(quality, positions, rotations, workspace_pose, config: AntipodalCon
     return keep
 
 
-def _nms(order: np.ndarray, positions, rotations, config: AntipodalConfig) -> list[int]:
+def _nms(
+    order: np.ndarray, positions: np.ndarray, rotations: np.ndarray, config: AntipodalConfig
+) -> list[int]:
     """Greedy suppression in quality order; a π turn about z is the same grasp."""
     flip = np.diag([-1.0, -1.0, 1.0])
     cos_limit = math.cos(config.nms_angle)

@@ -11,7 +11,7 @@ import logging
 import secrets
 import time
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 import grpc
 from pydantic import ValidationError
@@ -30,6 +30,9 @@ from service.errors import (
 from service.grpc.handlers import MalformedRequest
 from service.settings import Settings
 from service.vgn.checkpoint import CheckpointError
+
+if TYPE_CHECKING:
+    from service.api.metrics import ServiceMetrics
 
 log = logging.getLogger("vgn.service")
 
@@ -60,11 +63,14 @@ def validation_message(error: ValidationError) -> str:
 
 
 def abort(context: grpc.ServicerContext, code: grpc.StatusCode, message: str, http_status: int) -> None:
+    """End the call with ``code`` and ``message``, naming in
+    the trailers the HTTP status the same failure gets."""
     context.set_trailing_metadata(((HTTP_STATUS_KEY, str(http_status)),))
     context.abort(code, message)
 
 
 def api_key_of(context: grpc.ServicerContext) -> str | None:
+    """The key a call presents: ``x-api-key`` metadata, else an ``authorization: Bearer`` token."""
     metadata = {key.lower(): value for key, value in context.invocation_metadata()}
     given = metadata.get("x-api-key")
     authorization = metadata.get("authorization", "")
@@ -77,6 +83,13 @@ F = TypeVar("F", bound=Callable[..., Any])
 #: (code, message, HTTP status) of a refused call.
 Failure = tuple[grpc.StatusCode, str, int]
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GraspPlanning"].full_name
+
+
+class Servicer(Protocol):
+    """What ``rpc`` reads from the servicer it wraps the methods of."""
+
+    settings: Settings
+    metrics: ServiceMetrics | None
 
 
 def refusal(settings: Settings, context: grpc.ServicerContext) -> Failure | None:
@@ -99,7 +112,7 @@ def rpc(method: F) -> F:
     route = f"/{SERVICE_NAME}/{method.__name__}"
 
     @functools.wraps(method)
-    def wrapper(self, request: Any, context: grpc.ServicerContext) -> Any:
+    def wrapper(self: Servicer, request: Any, context: grpc.ServicerContext) -> Any:
         started = time.perf_counter()
         failure, result = refusal(self.settings, context), None
         if failure is None and isinstance(request, MalformedRequest):

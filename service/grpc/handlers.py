@@ -29,6 +29,7 @@ class MalformedRequest:
     reason: str
 
     def describe(self) -> str:
+        """The INVALID_ARGUMENT message: which message type, and what the parser objected to."""
         return f"the request is not a valid {self.message_type} message ({self.reason})"
 
 

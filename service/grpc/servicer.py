@@ -28,33 +28,47 @@ class GraspPlanning(GraspPlanningServicer):
 
     @rpc
     def CreateSession(self, request: pb.CreateSessionRequest, context: grpc.ServicerContext) -> pb.Session:
+        """``POST /sessions``: the request validated by the same schema as over HTTP."""
         spec = SessionCreate.model_validate(convert.session_create_dict(request))
         return convert.session_message(self.core.create_session(spec))
 
     @rpc
     def GetSession(self, request: pb.GetSessionRequest, context: grpc.ServicerContext) -> pb.Session:
+        """``GET /sessions/{id}``."""
         return convert.session_message(self.core.session_info(request.session_id))
 
     @rpc
-    def ListSessions(self, request: pb.ListSessionsRequest, context) -> pb.ListSessionsResponse:
+    def ListSessions(
+        self, request: pb.ListSessionsRequest, context: grpc.ServicerContext
+    ) -> pb.ListSessionsResponse:
+        """``GET /sessions``."""
         sessions = [convert.session_message(info) for info in self.core.list_sessions()]
         return pb.ListSessionsResponse(sessions=sessions, max_sessions=self.core.sessions.max_sessions)
 
     @rpc
-    def DeleteSession(self, request: pb.DeleteSessionRequest, context) -> pb.DeleteSessionResponse:
+    def DeleteSession(
+        self, request: pb.DeleteSessionRequest, context: grpc.ServicerContext
+    ) -> pb.DeleteSessionResponse:
+        """``DELETE /sessions/{id}``."""
         self.core.delete_session(request.session_id)
         return pb.DeleteSessionResponse()
 
     @rpc
     def ResetSession(self, request: pb.ResetSessionRequest, context: grpc.ServicerContext) -> pb.Session:
+        """``POST /sessions/{id}/reset``."""
         return convert.session_message(self.core.reset_session(request.session_id))
 
     @rpc
     def AddFrame(self, request: pb.Frame, context: grpc.ServicerContext) -> pb.FrameResult:
+        """``POST /sessions/{id}/frames``, one frame with its meta in the message."""
         return convert.frame_result_message(self._fuse(request.session_id, request))
 
     @rpc
-    def StreamFrames(self, request_iterator: Iterator[pb.Frame], context) -> pb.StreamFramesResult:
+    def StreamFrames(
+        self, request_iterator: Iterator[pb.Frame], context: grpc.ServicerContext
+    ) -> pb.StreamFramesResult:
+        """Fuse a stream of one session's frames, each checked as an upload; the first bad frame ends the
+        call with its index in the message. A cancelled stream stops at the frame it reached."""
         session_id, received, integration_ms, result = "", 0, 0.0, None
         for index, frame in enumerate(request_iterator):
             if not context.is_active():  # cancelled, or past its deadline
@@ -84,6 +98,7 @@ class GraspPlanning(GraspPlanningServicer):
 
     @rpc
     def GetGrasps(self, request: pb.GraspQuery, context: grpc.ServicerContext) -> pb.GraspResult:
+        """``GET /sessions/{id}/grasps``, counted in the same planning metrics."""
         query = GraspQuery.model_validate(convert.grasp_query_dict(request))
         result = self.core.plan(request.session_id, query)
         if self.metrics is not None:
@@ -93,16 +108,19 @@ class GraspPlanning(GraspPlanningServicer):
 
     @rpc
     def GetGrid(self, request: pb.GetGridRequest, context: grpc.ServicerContext) -> pb.Grid:
+        """``GET /sessions/{id}/tsdf``: the grid as little-endian float32 bytes with its shape."""
         grid = self.core.grid(request.session_id)
         return pb.Grid(shape=grid.shape, data=convert.array_bytes(grid))
 
     @rpc
     def GetCloud(self, request: pb.GetCloudRequest, context: grpc.ServicerContext) -> pb.Cloud:
+        """``GET /sessions/{id}/cloud``: (count, 6) little-endian float32 points and normals."""
         cloud = self.core.cloud(request.session_id)
         return pb.Cloud(count=len(cloud), data=convert.array_bytes(cloud))
 
     @rpc
-    def GetModelInfo(self, request: pb.GetModelInfoRequest, context) -> pb.ModelInfo:
+    def GetModelInfo(self, request: pb.GetModelInfoRequest, context: grpc.ServicerContext) -> pb.ModelInfo:
+        """``GET /model``; card and runtime as JSON text."""
         return convert.model_info_message(self.core.model_info())
 
     def _fuse(self, session_id: str, frame: pb.Frame) -> FrameResult:

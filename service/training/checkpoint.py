@@ -45,6 +45,7 @@ def checkpoint_path(out: Path) -> Path:
 
 
 def capture_rng() -> dict[str, Any]:
+    """The torch (and CUDA) random states, so a resumed run draws what an uninterrupted one would."""
     state: dict[str, Any] = {"torch": torch.get_rng_state()}
     if torch.cuda.is_available():
         state["cuda"] = torch.cuda.get_rng_state_all()
@@ -52,6 +53,7 @@ def capture_rng() -> dict[str, Any]:
 
 
 def restore_rng(state: dict[str, Any]) -> None:
+    """Put back what ``capture_rng`` saved; CUDA states only where CUDA is present."""
     if "torch" in state:
         torch.set_rng_state(state["torch"])
     if "cuda" in state and torch.cuda.is_available():

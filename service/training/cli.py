@@ -48,6 +48,7 @@ examples:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``vgn-train`` command line, its options grouped: data, training, evaluation, machine."""
     parser = argparse.ArgumentParser(
         prog="vgn-train",
         description=DESCRIPTION,
@@ -246,6 +247,7 @@ def _threshold(text: str) -> float | None:
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
+    """The parsed command line as a ``TrainConfig``; ``--augment none`` turns augmentation off."""
     return TrainConfig(
         data=args.data,
         out=args.out,
@@ -307,6 +309,8 @@ def summary(result: TrainResult) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Train, optionally evaluate into the card, and print
+    the summary; 2 for bad input, 130 when interrupted."""
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
     if args.threads:

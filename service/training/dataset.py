@@ -32,12 +32,15 @@ class PackedGrid:
     quantised: np.ndarray
 
     def load(self) -> np.ndarray:
+        """The grid as float32, dequantised from the shard's bytes."""
         return dequantize(self.quantised)
 
     def is_cached(self) -> bool:
+        """Always: a packed grid needs no fusing (the ``GridSource`` interface)."""
         return True
 
     def build(self) -> np.ndarray:
+        """The same as ``load``: there is nothing to fuse."""
         return self.load()
 
 
@@ -73,6 +76,7 @@ class DatasetSummary:
     cache: str
 
     def as_dict(self) -> dict:
+        """The summary as JSON-ready fields for the model card."""
         return asdict(self)
 
 
@@ -225,6 +229,8 @@ def prepare_grids(scenes: list[Scene], workers: int = 0, progress: bool = True) 
 
 @dataclass
 class Sample:
+    """One scene drawn for a batch: its (possibly augmented) grid, labels and voxel size in metres."""
+
     grid: torch.Tensor
     labels: LabelSet
     voxel_size: float
@@ -298,6 +304,7 @@ class Batch:
         return Batch(*(getattr(self, name).pin_memory() for name in self.__dataclass_fields__))
 
     def to(self, device: torch.device) -> Batch:
+        """The batch on ``device``; non-blocking, so a pinned batch copies while the GPU computes."""
         return Batch(
             *(getattr(self, name).to(device, non_blocking=True) for name in self.__dataclass_fields__)
         )

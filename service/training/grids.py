@@ -79,6 +79,7 @@ class GridSource:
 
     @property
     def scene_path(self) -> Path:
+        """The raw scene file the grid is fused from."""
         return self.dataset.scenes_dir / f"{self.scene_id}.npz"
 
     def load(self) -> np.ndarray:
@@ -109,7 +110,7 @@ class GridSource:
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             return False
 
-    def _matches(self, data) -> bool:
+    def _matches(self, data: np.lib.npyio.NpzFile) -> bool:
         return str(data["key"]) == self.key and int(data["scene_bytes"]) == self._scene_bytes()
 
     def build(self) -> np.ndarray:

@@ -81,6 +81,8 @@ class MetricAccumulator:
             self.width_error_sum += float(width_m.sum()) * 1e3
 
     def result(self) -> dict[str, float | int | None]:
+        """The epoch's means: losses, accuracy, precision and recall, pose errors on positives and the
+        precision-recall curve; ``None`` where nothing was counted."""
         tp, fp, fn = self.true_positives, self.false_positives, self.false_negatives
         negatives = self.labels - self.positives
         positive_loss = _ratio(self.positive_loss_sum, self.positives)

@@ -22,6 +22,7 @@ from vgn_data.dataset import RawDataset
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``vgn-pack-data`` command line; the module docstring is its help text."""
     parser = argparse.ArgumentParser(
         prog="vgn-pack-data", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -43,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Pack a raw dataset's new scenes into shards, or with
+    ``--show`` print a shard folder's totals; 2 for bad input."""
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
     if args.show is not None:

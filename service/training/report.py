@@ -34,5 +34,6 @@ def row(entry: dict[str, Any]) -> str:
 
 
 def table(history: list[dict[str, Any]]) -> str:
+    """The whole history as a table, its columns from validation when the run had a validation split."""
     validation = bool(history) and history[0].get("val") is not None
     return "\n".join([header(validation), *(row(entry) for entry in history)])

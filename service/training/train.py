@@ -99,6 +99,7 @@ class TrainConfig:
         self.check()
 
     def check(self) -> None:
+        """Refuse settings that cannot train (raised as ``TrainingError``), before any data is read."""
         if self.out.suffix != ".safetensors":
             raise TrainingError(f"--out must end in .safetensors, got {self.out}")
         if self.epochs < 1 or self.batch_scenes < 1 or self.workers < 0 or self.lr <= 0:
@@ -380,7 +381,7 @@ def _run_epoch(
 
 
 def _memory_format(device: torch.device) -> torch.memory_format:
-    """oneDNN's preferred 3D layout: about halves a VGN training step on a CPU."""
+    """The 3D layout oneDNN prefers on a CPU: it about halves a VGN training step there."""
     return torch.channels_last_3d if device.type == "cpu" else torch.contiguous_format
 
 

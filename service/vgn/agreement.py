@@ -20,6 +20,9 @@ from client.schemas import Grasp
 
 @dataclass(frozen=True)
 class Tolerance:
+    """How far two grasps may differ and still count as the
+    same: position (metres), angle (degrees) and quality."""
+
     position_m: float
     angle_deg: float = 5.0
     quality: float = 0.02
@@ -34,6 +37,8 @@ def grasp_angle_deg(a: Grasp, b: Grasp) -> float:
 
 
 def matches(a: Grasp, b: Grasp, tolerance: Tolerance) -> bool:
+    """Whether ``b`` is ``a`` within ``tolerance`` in position,
+    quality and angle (up to the fingers' half-turn)."""
     close = np.linalg.norm(np.subtract(a.position, b.position)) <= tolerance.position_m + 1e-9
     return bool(
         close

@@ -17,6 +17,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -34,12 +35,14 @@ class BatchStats:
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def record(self, size: int) -> None:
+        """Count one forward pass that carried ``size`` grids."""
         with self.lock:
             self.batches += 1
             self.grids += size
             self.largest = max(self.largest, size)
 
     def as_dict(self) -> dict[str, float | int]:
+        """The counts and the mean batch size, read consistently under the lock."""
         with self.lock:
             mean = self.grids / self.batches if self.batches else 0.0
             return {"batches": self.batches, "grids": self.grids, "largest": self.largest, "mean": mean}
@@ -63,7 +66,7 @@ class MicroBatcher:
         self._leading = False
         self.stats = BatchStats()
 
-    def run(self, grid: np.ndarray):
+    def run(self, grid: np.ndarray) -> Any:
         """The output for one grid, from a forward pass it may share with others."""
         future: Future = Future()
         self._queue.put((grid, future))

@@ -56,6 +56,7 @@ def detect_grasps(
         width: (N, N, N) opening widths in voxels.
         voxel_size: metres per voxel; voxel (i, j, k) sits at (i, j, k) * voxel_size.
         workspace_pose: 4×4 workspace → world.
+        config: threshold, suppression window, width limits and the optional crop and cone.
         near_surface: ``grasp_region(grid, config)`` when the caller computed it already
             (it depends on the grid only, so it can be worked out while the network runs).
     """
@@ -112,7 +113,9 @@ def local_maxima(score: np.ndarray, size: int) -> np.ndarray:
     return candidates[peaks]
 
 
-def _valid_quality(near_surface: np.ndarray, quality: np.ndarray, width: np.ndarray, config: DetectionConfig):
+def _valid_quality(
+    near_surface: np.ndarray, quality: np.ndarray, width: np.ndarray, config: DetectionConfig
+) -> np.ndarray:
     """Smoothed quality, zero where no grasp may be: away from the observed free space near
     the surface, at implausible widths, or below the threshold."""
     score = ndimage.gaussian_filter(quality.astype(np.float32), config.smoothing_sigma, mode="nearest")
@@ -131,7 +134,9 @@ def _crop_mask(shape: tuple[int, ...], voxel_size: float, config: DetectionConfi
     return mask
 
 
-def _inside_cone(candidates, rotation, workspace_pose, config: DetectionConfig) -> np.ndarray:
+def _inside_cone(
+    candidates: np.ndarray, rotation: np.ndarray, workspace_pose: np.ndarray, config: DetectionConfig
+) -> np.ndarray:
     quaternions = rotation[(slice(None), *candidates.T)].T
     approach_ws = Rotation.from_quat(quaternions).apply([0.0, 0.0, 1.0])
     approach_world = approach_ws @ workspace_pose[:3, :3].T
@@ -141,7 +146,14 @@ def _inside_cone(candidates, rotation, workspace_pose, config: DetectionConfig) 
     return np.arccos(cosine) <= config.max_approach_angle_rad
 
 
-def _to_world(indices, score, rotation, width, voxel_size, workspace_pose) -> list[Grasp]:
+def _to_world(
+    indices: np.ndarray,
+    score: np.ndarray,
+    rotation: np.ndarray,
+    width: np.ndarray,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+) -> list[Grasp]:
     if not len(indices):
         return []
     index = tuple(indices.T)

@@ -100,9 +100,12 @@ class FastVGN(nn.Module):
 
     @classmethod
     def from_vgn(cls, network: VGN, dtype: torch.dtype = torch.float32) -> FastVGN:
+        """The fast form of a ``VGN``'s weights, in eval mode;
+        ``dtype`` is the compute precision (outputs stay float32)."""
         return cls(network.eval(), dtype).eval()
 
     def forward(self, grid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """What ``VGN.forward`` returns for ``grid``, as float32, computed at ``dtype``."""
         x = grid.to(self.dtype)
         for index, (stride, padding) in enumerate(self._strides):
             weight, bias = getattr(self, f"plain{index}_w"), getattr(self, f"plain{index}_b")

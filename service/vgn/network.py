@@ -27,6 +27,7 @@ class Encoder(nn.Module):
         self.conv3 = _conv(32, 64, 3, stride=2)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, 1, N, N, N) grids → (B, 64, N/8, N/8, N/8) features."""
         return F.relu(self.conv3(F.relu(self.conv2(F.relu(self.conv1(x))))))
 
 
@@ -40,6 +41,7 @@ class Decoder(nn.Module):
         self.conv3 = _conv(32, 16, 5)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, 64, N/8, N/8, N/8) features → (B, 16, N, N, N)."""
         for conv in (self.conv1, self.conv2, self.conv3):
             x = F.interpolate(F.relu(conv(x)), scale_factor=2)
         return x
@@ -58,6 +60,7 @@ class VGN(nn.Module):
         self.conv_width = _conv(16, 1, 5)
 
     def forward(self, grid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Quality, rotation and width of every voxel, as the class docstring lays them out."""
         features = self.decoder(self.encoder(grid))
         quality = torch.sigmoid(self.conv_qual(features))
         rotation = F.normalize(self.conv_rot(features), dim=1)

@@ -35,7 +35,7 @@ def _asset(name: str) -> str:
 
 
 def _inline_script(text: str) -> str:
-    """Script text that cannot close its <script> element early (``<\\/`` reads as ``</`` in JS strings)."""
+    r"""Script text that cannot close its <script> element early (``<\/`` reads as ``</`` in JS strings)."""
     return SCRIPT_END.sub(r"<\\/\1", text)
 
 

@@ -34,6 +34,7 @@ class ViewQuery(GraspQuery):
     )
 
     def grasp_query(self) -> GraspQuery:
+        """The planning options alone, as the grasp request would send them."""
         return GraspQuery.model_validate(self.model_dump(include=set(GraspQuery.model_fields)))
 
 
