@@ -1,6 +1,6 @@
 """Split an object folder (VGN layout) into train and held-out objects, *by object*.
 
-    python -m sim_worker.object_split ../shared/objects/pile/train ~/vgn-data/objects/pile --holdout 0.1
+    python -m sim_worker.object_split $VGN_OBJECTS/pile/train ~/vgn-data/objects/pile --holdout 0.1
 
 Membership depends only on each object's name (a hash), so the split is reproducible and
 stable when objects are added. The new folders hold symbolic links to the URDF and its
