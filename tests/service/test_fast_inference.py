@@ -17,7 +17,8 @@ from service.vgn.network import VGN
 from tests.helpers.grids import recorded_grids
 
 VOXEL = 0.3 / 40
-#: Low enough that every recorded scene has at least 10 grasps to compare.
+#: Low enough that the recorded scenes offer most of their grasps (after non-maximum suppression a
+#: scene has 8-15 with the packaged model), so the top 10 are compared where there are 10.
 THRESHOLD = 0.3
 
 
@@ -62,10 +63,13 @@ def test_fast_top10_grasps_agree_with_the_reference_on_recorded_scenes(dtype):
     reference = load_vgn(PACKAGED_MODEL)
     fast = FastVGN.from_vgn(reference, dtype)
     tolerance = Tolerance(position_m=VOXEL, angle_deg=5.0, quality=0.02)
+    compared = 0
     for name, grid in recorded_grids():
         expected, actual = grasps_of(reference, grid), grasps_of(fast, grid)
-        assert len(expected) >= 10, f"{name}: the recorded scene should offer 10 grasps to compare"
+        assert len(expected) >= 5, f"{name}: the recorded scene should offer grasps to compare"
         assert disagreements(expected, actual, tolerance) == [], name
+        compared += min(len(expected), 10)
+    assert compared >= 35, "the recorded scenes should offer enough grasps to compare"
 
 
 def test_the_agreement_check_notices_a_different_network():
