@@ -47,10 +47,15 @@ class CurvePoint:
 
 @dataclass(frozen=True)
 class LogFit:
-    """success % = intercept + slope · log10(scenes), and where it reaches ``target``."""
+    """success % = intercept + slope · log10(scenes), and where it reaches ``target``.
+
+    ``scenes_for_target`` is None unless the slope's 95 % interval (from the points' own
+    intervals) lies above zero: a flat curve predicts no size, however small its slope.
+    """
 
     intercept: float
     slope: float
+    slope_ci95: tuple[float, float]
     target: float
     scenes_for_target: float | None
 
@@ -179,10 +184,13 @@ def fit_log_curve(points: list[CurvePoint], target: float) -> LogFit | None:
     x = np.log10([p.train_scenes for p in usable])
     y = np.array([p.success_rate for p in usable])
     half_widths = np.array([max((p.success_rate_ci95[1] - p.success_rate_ci95[0]) / 2, 1.0) for p in usable])
-    design = np.stack([np.ones_like(x), x], axis=1) / half_widths[:, None]
-    (intercept, slope), *_ = np.linalg.lstsq(design, y / half_widths, rcond=None)
-    reach = 10 ** ((target - intercept) / slope) if slope > 0 else None
-    return LogFit(float(intercept), float(slope), target, None if reach is None else float(reach))
+    sigmas = half_widths / 1.96  # a 95 % interval's half-width in standard deviations
+    design = np.stack([np.ones_like(x), x], axis=1) / sigmas[:, None]
+    (intercept, slope), *_ = np.linalg.lstsq(design, y / sigmas, rcond=None)
+    slope_error = 1.96 * math.sqrt(np.linalg.inv(design.T @ design)[1, 1])
+    slope_ci95 = (float(slope - slope_error), float(slope + slope_error))
+    reach = 10 ** ((target - intercept) / slope) if slope_ci95[0] > 0 else None
+    return LogFit(float(intercept), float(slope), slope_ci95, target, None if reach is None else float(reach))
 
 
 def markdown(points: list[CurvePoint], fit: LogFit | None, args: argparse.Namespace) -> str:
@@ -209,17 +217,19 @@ def markdown(points: list[CurvePoint], fit: LogFit | None, args: argparse.Namesp
     lines.append("")
     if fit is None:
         lines.append("No fit: it needs successes measured at two or more dataset sizes.")
-    elif fit.scenes_for_target is None:
-        lines.append(
-            f"Fit: success = {fit.intercept:.1f} + {fit.slope:.1f}·log10(scenes): not rising, so no size is "
-            f"predicted to reach {fit.target:.1f} %."
-        )
     else:
-        lines.append(
-            f"Fit: success = {fit.intercept:.1f} + {fit.slope:.1f}·log10(scenes); it reaches {fit.target:.1f} % "
-            f"at about {fit.scenes_for_target:,.0f} training scenes. An extrapolation of a straight line on a "
-            "log axis: treat it as an order of magnitude."
-        )
+        slope = f"{fit.slope:.1f} (95 % CI {fit.slope_ci95[0]:.1f} to {fit.slope_ci95[1]:.1f})"
+        if fit.scenes_for_target is None:
+            lines.append(
+                f"Fit: success = {fit.intercept:.1f} + {slope}·log10(scenes): not rising beyond the "
+                f"intervals, so no size is predicted to reach {fit.target:.1f} %."
+            )
+        else:
+            lines.append(
+                f"Fit: success = {fit.intercept:.1f} + {slope}·log10(scenes); it reaches "
+                f"{fit.target:.1f} % at about {fit.scenes_for_target:.2g} training scenes. An extrapolation "
+                "of a straight line on a log axis: treat it as an order of magnitude."
+            )
     return "\n".join(lines) + "\n"
 
 
@@ -232,6 +242,7 @@ def write_plot(points: list[CurvePoint], fit: LogFit | None, path: Path) -> Path
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
     import numpy as np
 
     figure, axes = plt.subplots(figsize=(6, 4))
@@ -243,11 +254,12 @@ def write_plot(points: list[CurvePoint], fit: LogFit | None, path: Path) -> Path
     ]
     axes.errorbar(x, y, yerr=errors, fmt="o", capsize=4, label="measured (95 % CI)")
     if fit is not None:
-        right = max(max(x) * 2, fit.scenes_for_target or 0)
+        right = max(max(x) * 2, min(fit.scenes_for_target or 0, max(x) * 1000))
         line_x = np.geomspace(min(x) / 1.5, right * 1.2, 50)
         axes.plot(line_x, fit.intercept + fit.slope * np.log10(line_x), "--", label="fit a + b·log10(scenes)")
         axes.axhline(fit.target, color="gray", linewidth=0.8, label=f"target {fit.target:.1f} %")
     axes.set_xscale("log")
+    axes.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())  # labels on decades only
     axes.set_xlabel("training scenes")
     axes.set_ylabel("executed-grasp success %")
     axes.set_ylim(0, 100)

@@ -45,6 +45,13 @@ def test_the_fit_weighs_short_runs_less():
     assert fit is not None and fit.slope > 10.0, "the outlier with a wide interval barely counts"
 
 
+def test_a_flat_curve_predicts_no_size():
+    """A slope well inside the points' intervals is no evidence that more data helps."""
+    fit = fit_log_curve([point(250, 38.7), point(700, 42.4), point(2111, 38.8)], target=62.3)
+    assert fit is not None and fit.slope_ci95[0] < 0 < fit.slope_ci95[1]
+    assert fit.scenes_for_target is None
+
+
 def test_no_fit_from_one_size_and_no_target_from_a_falling_line():
     assert fit_log_curve([point(100, 30.0)], target=60.0) is None
     falling = fit_log_curve([point(100, 40.0), point(1000, 30.0)], target=60.0)
