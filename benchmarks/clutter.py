@@ -77,6 +77,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
     parser.add_argument("--noise", action="store_true", help="depth noise on every view (a real sensor)")
+    parser.add_argument(
+        "--clearance",
+        action="store_true",
+        help="ask for grasps whose open hand clears the observed surface on its approach; rows are "
+        "labelled PLANNER+clearance and results go to folders ending in -clearance",
+    )
     parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     parser.add_argument(
@@ -112,7 +118,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
     return ClutterConfig(
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
         threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection,
-        planner=planner, renderer=args.renderer, noise=args.noise, views=args.views,
+        planner=planner, renderer=args.renderer, noise=args.noise, views=args.views, clearance=args.clearance,
     )  # fmt: skip
 
 
@@ -122,11 +128,14 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
         for selection in args.selections:
             for scenario in args.scenarios:
                 suffix = ("-noise" if args.noise else "") + ("-side" if args.views == "side" else "")
+                suffix += "-clearance" if args.clearance else ""
                 yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}{suffix}"
 
 
 def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
-    """One line of the results table: the run's identity, its threshold and model, and its summary."""
+    """One line of the results table: the run's identity (a planner with the clearance check is
+    ``PLANNER+clearance``), its threshold and model, and its summary."""
+    planner = f"{planner}+clearance" if config.get("clearance") else planner
     return {"planner": planner, "selection": selection, "scenario": scenario,
             "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
 

@@ -72,6 +72,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
+    grasps.add_argument(
+        "--clearance",
+        action="store_true",
+        help="drop grasps whose open hand would touch the observed surface on its approach",
+    )
 
     view = commands.add_parser(
         "view",
@@ -91,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--crop-max", help="'x,y,z' upper crop corner, workspace frame, metres")
     view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
     view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
+    view.add_argument("--clearance", action="store_true", help="only grasps whose approach is clear")
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -187,6 +193,11 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
     clear.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn",
                        help="the VGN network, or the service's geometric antipodal baseline (no model needed)")  # fmt: skip
     clear.add_argument(
+        "--clearance",
+        action="store_true",
+        help="ask for grasps whose open hand clears the observed surface on its approach (recorded in config.json)",
+    )
+    clear.add_argument(
         "--results",
         help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",
     )
@@ -235,13 +246,16 @@ def _sessions(vgn: VGNClient) -> int:
 
 
 def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
-    result = vgn.grasps(args.session_id, threshold=args.threshold, max_grasps=args.top)
+    result = vgn.grasps(
+        args.session_id, threshold=args.threshold, max_grasps=args.top, clearance=args.clearance
+    )
     if args.json:
         print(result.model_dump_json(indent=2))
         return 0
+    dropped = "" if result.clearance_dropped is None else f", {result.clearance_dropped} dropped by clearance"
     print(
         f"{len(result.grasps)} grasps in {result.planning_ms:.1f} ms (model {result.model}, "
-        f"{result.frame_count} frames)"
+        f"{result.frame_count} frames{dropped})"
     )
     print(f"{'#':>3} {'quality':>7} {'x':>7} {'y':>7} {'z':>7} {'width':>6}  approach")
     for rank, g in enumerate(result.grasps, 1):
@@ -265,6 +279,8 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
+    if args.clearance:
+        options["clearance"] = True
     try:
         page = vgn.view_page(args.session_id, **options)
     except ValueError as error:  # the options broke GraspQuery's rules before anything was sent

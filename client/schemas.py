@@ -254,6 +254,12 @@ class GraspQuery(_Model):
         le=180.0,
         description="degrees between a grasp's approach and `approach`; only with approach",
     )
+    clearance: bool = Field(
+        default=False,
+        description="drop grasps whose open hand (fingers at the 0.08 m maximum opening and palm, "
+        "franka-v2 dimensions) would touch the observed surface while approaching from 5 cm back "
+        "along the approach; applies to both planners, before max_grasps",
+    )
 
     @field_validator("crop_min", "crop_max", "approach", mode="before")
     @classmethod
@@ -289,8 +295,11 @@ class GraspQuery(_Model):
         return _parse_vector3("approach", self.approach)
 
     def to_params(self) -> dict[str, Any]:
-        """Query parameters for the request, the options left unset omitted."""
-        return self.model_dump(exclude_none=True)
+        """Query parameters for the request, the options left unset (and ``clearance`` when off) omitted."""
+        params = self.model_dump(exclude_none=True)
+        if not params.pop("clearance"):
+            return params
+        return {**params, "clearance": "true"}
 
 
 class Grasp(_Model):
@@ -318,6 +327,9 @@ class GraspResult(_Model):
     frame_count: int
     model: str = Field(description="id of the weights that planned these grasps, or 'antipodal'")
     threshold: float = Field(description="the quality threshold these grasps passed")
+    clearance_dropped: int | None = Field(
+        default=None, description="grasps the clearance check dropped; null when it was not asked for"
+    )
 
 
 class ModelInfo(_Model):

@@ -21,6 +21,7 @@ from client.schemas import (
     SessionInfo,
 )
 from service.baseline import plan_antipodal
+from service.clearance import clear_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
@@ -171,22 +172,29 @@ class PlanningService:
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
             observed = session.volume.cloud() if baseline else session.volume.grid()
+            surface = session.volume.surface_points() if query.clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             frame_count, integration_ms = session.frame_count, session.integration_ms
             revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
+        # With the clearance check, every grasp is checked and only then are max_grasps kept.
+        ranked = query.model_copy(update={"max_grasps": None}) if query.clearance else query
         if baseline:
-            config = antipodal_config(query)
+            config = antipodal_config(ranked)
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
             threshold = config.threshold
         else:
             reuse = self.settings.reuse_output and kept is not None and kept[0] == revision
             output = kept[1] if reuse else self.planner.infer(observed)
-            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, query)
+            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, ranked)
             if self.settings.reuse_output and not reuse:
                 self._keep_output(session_id, revision, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
+        dropped = None
+        if surface is not None:
+            clear = clear_grasps(grasps, surface)
+            grasps, dropped = clear[: query.max_grasps], len(grasps) - len(clear)
         return GraspResult(
             grasps=grasps,
             planning_ms=round((time.perf_counter() - started) * 1e3, 3),
@@ -194,6 +202,7 @@ class PlanningService:
             frame_count=frame_count,
             model=model,
             threshold=threshold,
+            clearance_dropped=dropped,
         )
 
     def _keep_output(self, session_id: str, revision: int, output: object) -> None:

@@ -98,6 +98,11 @@ class TSDFVolume:
         normals = np.asarray(cloud.normals, dtype=np.float64).reshape(-1, 3)
         return points, normals
 
+    def surface_points(self) -> np.ndarray:
+        """(M, 3) points where the fused TSDF crosses zero, workspace frame: the observed
+        surface at sub-voxel precision, without normals (under 1 ms for 40³)."""
+        return np.asarray(self._volume.extract_point_cloud().points, dtype=np.float64).reshape(-1, 3)
+
 
 @dataclass(frozen=True)
 class QueuedFrame:
@@ -212,6 +217,12 @@ class SceneVolume:
     def grid(self) -> np.ndarray:
         """The network input, (N, N, N) float32 in the workspace frame (see ``TSDFVolume.grid``)."""
         return self.coarse.grid()
+
+    def surface_points(self) -> np.ndarray:
+        """(M, 3) surface points of the coarse volume (the network's), *world* frame: the cheap
+        observed geometry the clearance check tests hands against (``TSDFVolume.surface_points``)."""
+        points = self.coarse.surface_points()
+        return points @ self.workspace_pose[:3, :3].T + self.workspace_pose[:3, 3]
 
     def cloud(self) -> np.ndarray:
         """(M, 6) float32 points and unit normals of the fused surface in the *world* frame."""

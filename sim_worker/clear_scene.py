@@ -47,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
         noise=args.noise,
         planner=args.planner,
         renderer=args.renderer,
+        clearance=getattr(args, "clearance", False),
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
     results_dir.mkdir(parents=True, exist_ok=True)
@@ -87,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "
         f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {config.model}"
+        + (", clearance check" if config.clearance else "")
     )
     print(summary_table(summary))
     print(f"results: {results_dir}/ (rounds.csv, grasps.csv, summary.json)")

@@ -53,6 +53,7 @@ class ClutterConfig:
     noise: bool = False
     renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
+    clearance: bool = False  # ask the service to drop grasps whose approach hits observed geometry
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -68,8 +69,14 @@ class ClutterConfig:
         check_fraction("threshold", self.threshold, optional=True)
 
     def as_json(self) -> dict:
-        """The settings as stored in the results folder's config.json, which a resume must match."""
-        return asdict(self)
+        """The settings as stored in the results folder's config.json, which a resume must match.
+
+        ``clearance`` is recorded when on; left out when off, so folders of runs from before
+        the option still resume."""
+        settings = asdict(self)
+        if not self.clearance:
+            del settings["clearance"]
+        return settings
 
 
 def camera_views(kind: str) -> list[np.ndarray]:
@@ -132,7 +139,10 @@ class ClutterRemoval:
             integration_ms = self._observe()
             client_started = time.perf_counter()
             answer = self.vgn.grasps(
-                self.session_id, threshold=self.config.threshold, planner=self.config.planner
+                self.session_id,
+                threshold=self.config.threshold,
+                planner=self.config.planner,
+                clearance=self.config.clearance,
             )
             client_ms = (time.perf_counter() - client_started) * 1e3
             if not answer.grasps:

@@ -98,7 +98,9 @@ def frame_meta_dict(message: pb.Frame) -> dict[str, Any]:
 def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
     """A ``GraspQuery`` dict with vectors as 'x,y,z' text, so the HTTP rules apply; an unknown planner is
     passed on for the schema to refuse."""
-    data = optional_fields(message, ("threshold", "max_grasps", "nms_size", "max_approach_angle"))
+    data = optional_fields(
+        message, ("threshold", "max_grasps", "nms_size", "max_approach_angle", "clearance")
+    )
     data["planner"] = PLANNER_NAMES.get(message.planner, f"unknown planner {message.planner}")
     for name in ("crop_min", "crop_max", "approach"):
         if message.HasField(name):
@@ -167,7 +169,7 @@ def grasp_result_message(result: GraspResult) -> pb.GraspResult:
         )
         for g in result.grasps
     ]
-    return pb.GraspResult(grasps=grasps, **result.model_dump(exclude={"grasps"}))
+    return pb.GraspResult(grasps=grasps, **result.model_dump(exclude={"grasps"}, exclude_none=True))
 
 
 def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
@@ -177,6 +179,8 @@ def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
         if getattr(query, name) is not None:
             setattr(message, name, getattr(query, name))
     message.nms_size = query.nms_size
+    if query.clearance:
+        message.clearance = True
     crop_min, crop_max = query.crop_box or (None, None)
     for name, values in (
         ("crop_min", crop_min),
@@ -249,6 +253,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
         frame_count=message.frame_count,
         model=message.model,
         threshold=message.threshold,
+        clearance_dropped=message.clearance_dropped if message.HasField("clearance_dropped") else None,
     )
 
 

@@ -156,3 +156,36 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
     (out / "table.md").unlink()
     assert main(["--report", "--out", str(out)]) == 0, "the table again from the results, running nothing"
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
+
+
+def test_clear_scene_records_the_clearance_option(server, tmp_path: Path):
+    results = tmp_path / "clearance"
+    run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
+                      "--clearance", "--results", str(results))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    check_results(results, 1)
+    assert json.loads((results / "config.json").read_text())["clearance"] is True
+    assert "clearance check" in run.stdout
+
+
+def test_configs_without_the_clearance_check_keep_their_recorded_form():
+    """Off, the option is left out of config.json, so results folders from before it still resume."""
+    from sim_worker.clutter import ClutterConfig
+
+    assert "clearance" not in ClutterConfig().as_json()
+    assert ClutterConfig(clearance=True).as_json()["clearance"] is True
+
+
+def test_benchmark_rows_with_the_clearance_check_are_labelled(tmp_path: Path):
+    from benchmarks.clutter import main
+
+    out = tmp_path / "bench"
+    assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
+                 "--renderer", "tiny", "--clearance", "--out", str(out)]) == 0  # fmt: skip
+    rows = json.loads((out / "table.json").read_text())
+    assert [(r["planner"], r["scenario"]) for r in rows] == [("antipodal+clearance", "blocks-5")]
+    assert "| antipodal+clearance | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
+    folder = out / "antipodal-best-blocks-5-clearance"
+    assert json.loads((folder / "config.json").read_text())["clearance"] is True
+    assert main(["--report", "--clearance", "--out", str(out)]) == 0
+    assert "| antipodal+clearance |" in (out / "table.md").read_text()

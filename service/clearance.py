@@ -1,0 +1,193 @@
+"""Clearance check: which grasps let the open hand reach them without touching observed geometry.
+
+The executor (``sim_worker/grasping.py``, VGN's protocol) places the hand open at the maximum
+opening 5 cm back along the approach, then moves it straight along the approach (+z of the
+grasp frame) to the grasp pose, orientation fixed. A grasp is *clear* when none of the hand's
+parts, swept along that path, comes near more than ``min_points - 1`` observed surface points.
+Points between the fingers (the closing region) never count: only the hand's own volume does.
+
+The hand is the ``franka-v2`` collision model of ``sim_worker/assets/gripper.urdf`` (a test
+compares the two), every part a box in the grasp frame (docs/conventions.md: +z approach,
+y closing axis, origin midway between the finger bases):
+
+- palm: 6 cm (x) by 20 cm (y) by 6 cm (z), its face at z = -4.5 mm;
+- per finger, at joint position q = half the opening (the pads' inner faces at y = ±q):
+  a 22 x 15 x 20 mm base block centred 18.5 mm outside the pad face at z = 6.5 mm, a
+  17.5 x 7 x 23.5 mm web tilted 30° about x, and the 20 x 15.2 x 18.5 mm rubber pad whose tip
+  is at z = 50 mm (the finger depth).
+
+Each swept box is tested exactly (slab test of the segment a point traces in the box's frame
+as the hand moves), after a k-d tree has picked the points near each grasp's swept volume.
+
+Geometry: the caller passes surface points, world frame. The service uses the zero crossings
+of the session's coarse TSDF (``SceneVolume.surface_points``): under 1 ms for a 40³ volume,
+where the fine cloud of ``/cloud`` costs tens to hundreds of milliseconds to fuse and extract.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from client.schemas import Grasp
+
+#: The hand's fully open width (m): the executor spawns the hand open this wide.
+MAX_OPENING = 0.08
+#: How far back along the approach the open hand starts (``sim_worker.grasping.PREGRASP_DISTANCE``).
+PREGRASP_DISTANCE = 0.05
+
+#: Palm box: centre and half extents in the grasp frame (URDF ``palm`` collision box).
+PALM_CENTRE, PALM_HALF = (0.0, 0.0, -0.0345), (0.03, 0.10, 0.03)
+#: The left finger's boxes (URDF ``left_finger`` collision boxes) at joint position 0:
+#: (centre, half extents, tilt about x in radians). The right finger mirrors them in y.
+FINGER_BOXES = (
+    ((0.0, 0.0185, 0.0065), (0.011, 0.0075, 0.01), 0.0),  # base block
+    ((0.0, 0.0159, 0.0239), (0.00875, 0.0035, 0.01175), 0.5236),  # web
+    ((0.0, 0.0076, 0.04075), (0.01, 0.0076, 0.00925), 0.0),  # rubber pad
+)
+#: (grasp, point) pairs tested at once.
+_CHUNK = 65536
+
+
+@dataclass(frozen=True)
+class ClearanceConfig:
+    """Knobs of the check.
+
+    ``margin`` (m) grows every box of the hand on all sides; ``min_points`` is how many surface
+    points inside the swept hand veto a grasp (one stray point does not); ``opening`` (m) is
+    the width the hand is open at while approaching; ``pregrasp_distance`` (m) how far back
+    along the approach the approach starts; ``contact_tolerance`` (m): contact in the last
+    this-many metres of the approach is allowed, since a guarded approach stops there and
+    closes only that much short of the grasp pose (often still a success, e.g. fingertips
+    meeting the table).
+
+    Defaults measured on the simulator (seed-1 pile-5 held-out scenes, every grasp of the
+    first attempt of 20 rounds executed with and without the check, 86 grasps, 56 % success):
+    2 mm / 2 points / 5 mm kept 56 grasps at 71 % success and 3 approach contacts (of 17);
+    with no tolerance the check also dropped grasps whose fingertips only touch the table
+    (43 kept, 72 %), with no margin it kept more approach contacts (68 kept, 65 %).
+    """
+
+    margin: float = 0.002
+    min_points: int = 2
+    opening: float = MAX_OPENING
+    pregrasp_distance: float = PREGRASP_DISTANCE
+    contact_tolerance: float = 0.005
+
+    def __post_init__(self) -> None:
+        if self.margin < 0 or self.min_points < 1 or not 0 <= self.opening <= MAX_OPENING:
+            raise ValueError(f"invalid clearance settings {self}")
+        if not 0 <= self.contact_tolerance <= self.pregrasp_distance:
+            raise ValueError(f"invalid clearance settings {self}")
+
+
+def hand_boxes(opening: float = MAX_OPENING, margin: float = 0.0) -> tuple[np.ndarray, ...]:
+    """The open hand as boxes in the grasp frame: centres (B, 3), rotations (B, 3, 3) box →
+    grasp frame and half extents (B, 3) grown by ``margin``. Palm first, then the left
+    (+y) and right (-y) fingers' base, web and pad."""
+    half_opening = 0.5 * opening
+    centres, rotations, halves = [PALM_CENTRE], [np.eye(3)], [PALM_HALF]
+    for side in (1.0, -1.0):
+        for (x, y, z), half, tilt in FINGER_BOXES:
+            centres.append((x, side * (y + half_opening), z))
+            rotations.append(Rotation.from_euler("x", side * tilt).as_matrix())
+            halves.append(half)
+    return (
+        np.asarray(centres, dtype=np.float64),
+        np.asarray(rotations, dtype=np.float64),
+        np.asarray(halves, dtype=np.float64) + margin,
+    )
+
+
+def approach_is_clear(
+    points: np.ndarray,
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    config: ClearanceConfig = ClearanceConfig(),
+) -> np.ndarray:
+    """Which grasps the open hand reaches without touching ``points``.
+
+    Args:
+        points: (M, 3) observed surface points. Any frame, as long as the grasps are in the
+            same one (the service passes world-frame points and world-frame grasps).
+        positions: (G, 3) grasp frame origins, in the frame of ``points``.
+        orientations: (G, 4) quaternions [x, y, z, w], grasp frame → the frame of ``points``.
+        config: margin, vetoing point count, opening and approach length.
+
+    Returns:
+        (G,) bool, True where fewer than ``config.min_points`` points lie in the hand swept
+        from the pre-grasp pose to the grasp pose.
+    """
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    clear = np.ones(len(positions), dtype=bool)
+    if not len(positions) or len(points) < config.min_points:
+        return clear
+    rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
+    centres, box_rotations, halves = hand_boxes(config.opening, config.margin)
+    # The swept hand's bounding box (grasp frame), and a ball around it for the k-d tree.
+    corners = _box_corners(centres, box_rotations, halves)  # (B, 8, 3) grasp frame
+    low = corners.min(axis=(0, 1)) - [0.0, 0.0, config.pregrasp_distance]
+    high = corners.max(axis=(0, 1))
+    middle, radius = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
+    ball_centres = positions + rotations @ middle
+    near = cKDTree(points).query_ball_point(ball_centres, radius)
+    counts = np.fromiter((len(n) for n in near), dtype=np.intp, count=len(near))
+    if not counts.sum():
+        return clear
+    grasp = np.repeat(np.arange(len(positions)), counts)
+    point = np.concatenate([np.asarray(n, dtype=np.intp) for n in near])
+    direction = box_rotations[:, 2, :]  # the grasp frame's +z in each box's frame, (B, 3)
+    hit = np.zeros(len(grasp), dtype=bool)
+    for chunk in range(0, len(grasp), _CHUNK):  # bounds the memory of many grasps on a big cloud
+        g, p = grasp[chunk : chunk + _CHUNK], point[chunk : chunk + _CHUNK]
+        # Each candidate point in the grasp frame, then in every box's frame.
+        local = np.einsum("pji,pj->pi", rotations[g], points[p] - positions[g])  # (P, 3)
+        bounded = np.flatnonzero(np.all((local >= low) & (local <= high), axis=1))
+        local = local[bounded]  # inside the swept hand's bounding box
+        in_box = np.einsum("bji,pbj->pbi", box_rotations, local[:, None, :] - centres[None])  # (P, B, 3)
+        swept = _segment_hits_box(
+            in_box, direction, halves, config.contact_tolerance, config.pregrasp_distance
+        )
+        hit[chunk + bounded] = swept.any(axis=1)
+    intruding = np.bincount(grasp[hit], minlength=len(positions))
+    return intruding < config.min_points
+
+
+def _box_corners(centres: np.ndarray, rotations: np.ndarray, halves: np.ndarray) -> np.ndarray:
+    """The 8 corners (B, 8, 3) of each box, in the frame the boxes are given in."""
+    signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1], indexing="ij")).reshape(3, 8).T
+    return centres[:, None, :] + np.einsum("bij,bkj->bki", rotations, signs[None] * halves[:, None, :])
+
+
+def _segment_hits_box(
+    start: np.ndarray, direction: np.ndarray, halves: np.ndarray, first_u: float, last_u: float
+) -> np.ndarray:
+    """Whether ``start + u * direction`` lies in the box ``|x_i| <= halves_i`` for some u in
+    [first_u, last_u] (slab test). ``start`` (P, B, 3), ``direction`` and ``halves`` (B, 3); (P, B) bool.
+
+    A point p is in the hand at offset -u along the approach (the hand u back from the grasp
+    pose) exactly when p + u z is in the hand at the grasp pose, hence the segment."""
+    moving = np.abs(direction) > 1e-12
+    safe = np.where(moving, direction, 1.0)
+    first = (-halves - start) / safe
+    second = (halves - start) / safe
+    inside = np.abs(start) <= halves
+    enter = np.where(moving, np.minimum(first, second), np.where(inside, -np.inf, np.inf))
+    leave = np.where(moving, np.maximum(first, second), np.where(inside, np.inf, -np.inf))
+    return np.maximum(enter.max(axis=-1), first_u) <= np.minimum(leave.min(axis=-1), last_u)
+
+
+def clear_grasps(
+    grasps: list[Grasp], points: np.ndarray, config: ClearanceConfig = ClearanceConfig()
+) -> list[Grasp]:
+    """The ``grasps`` (world frame, order kept) whose approach is clear of ``points`` (world frame)."""
+    if not grasps:
+        return []
+    positions = np.array([g.position for g in grasps])
+    orientations = np.array([g.orientation for g in grasps])
+    clear = approach_is_clear(points, positions, orientations, config)
+    return [g for g, ok in zip(grasps, clear, strict=True) if ok]

@@ -1,0 +1,276 @@
+"""The clearance check: the swept open hand against synthetic geometry, its hand model against the
+simulator's URDF, and the ``clearance`` grasp option over HTTP and in the planning core."""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from pathlib import Path
+
+import grpc
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from scipy.spatial.transform import Rotation
+
+from client.grpc_api import convert
+from client.grpc_api import grasp_planning_pb2 as pb
+from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
+from client.grpc_client import GRPCClient
+from client.schemas import GraspQuery, GraspResult, SessionCreate
+from service.app import create_app
+from service.clearance import (
+    MAX_OPENING,
+    PREGRASP_DISTANCE,
+    ClearanceConfig,
+    approach_is_clear,
+    clear_grasps,
+    hand_boxes,
+)
+from service.core import PlanningService
+from service.grpc.server import build_server
+from service.settings import PACKAGED_MODEL, Settings
+from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+
+URDF = Path(__file__).resolve().parents[2] / "sim_worker" / "assets" / "gripper.urdf"
+IDENTITY = np.array([[0.0, 0.0, 0.0, 1.0]])  # grasp frame = the points' frame: +z approach, y closing
+ORIGIN = np.zeros((1, 3))
+#: No margin, tolerance or vetoing count: the bare swept hand.
+EXACT = ClearanceConfig(margin=0.0, min_points=1, contact_tolerance=0.0)
+DEFAULT = ClearanceConfig()
+
+
+def clear(points, positions=ORIGIN, orientations=IDENTITY, config=DEFAULT) -> bool:
+    return bool(approach_is_clear(np.asarray(points, dtype=float), positions, orientations, config)[0])
+
+
+def cluster(centre, count: int = 5, spread: float = 0.001) -> np.ndarray:
+    """``count`` points within ``spread`` of ``centre``, like a patch of surface."""
+    offsets = np.random.default_rng(0).uniform(-spread, spread, (count, 3))
+    return np.asarray(centre) + offsets
+
+
+def object_between_the_fingers() -> np.ndarray:
+    """A dense block of points that fills the closing region (|y| < 3.5 cm, z in [0, 5 cm])."""
+    axes = [np.linspace(-0.03, 0.03, 7), np.linspace(-0.035, 0.035, 8), np.linspace(0.0, 0.05, 6)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+# The swept hand on synthetic geometry ------------------------------------------------------------
+def test_a_patch_in_a_fingers_path_drops_the_grasp():
+    for side in (1.0, -1.0):  # a patch on top of where each pad comes down, 3 cm above the tip
+        assert not clear(cluster((0.0, side * 0.047, 0.02)))
+    assert clear(cluster((0.0, 0.047, 0.06)))  # beyond the fingertips at the grasp pose: never reached
+
+
+def test_points_between_the_fingers_are_allowed():
+    assert clear(object_between_the_fingers())
+    assert clear(object_between_the_fingers(), config=EXACT)
+
+
+def test_a_wall_beside_the_object_at_the_pregrasp_height_drops_the_grasp():
+    obj = object_between_the_fingers()
+    # A wall 9 cm to the side, from 6 to 12 cm behind the finger bases: beyond the fingers (they
+    # reach y = 6.6 cm) but in the 20 cm wide palm's path on the way in from the pre-grasp pose.
+    ys, zs = np.meshgrid(np.linspace(-0.03, 0.03, 7), np.linspace(-0.12, -0.06, 7), indexing="ij")
+    wall = np.column_stack([ys.ravel(), np.full(ys.size, 0.09), zs.ravel()])
+    assert clear(obj)
+    assert not clear(np.vstack([obj, wall]))
+    assert clear(np.vstack([obj, wall + [0.0, 0.02, 0.0]]))  # 11 cm to the side: past the palm's 10 cm
+
+
+def test_a_single_noise_point_is_below_the_vetoing_count():
+    in_path = (0.0, 0.047, 0.02)
+    assert ClearanceConfig().min_points == 2
+    assert clear([in_path])
+    assert not clear(cluster(in_path, count=2))
+    assert not clear([in_path], config=ClearanceConfig(min_points=1))
+
+
+def test_the_margin_grows_the_hand():
+    just_outside = cluster((0.0, 0.0552 + 0.0015, 0.045), spread=0.0002)  # 1.5 mm outside the pad
+    assert clear(just_outside, config=EXACT)
+    assert not clear(just_outside, config=ClearanceConfig(margin=0.002, min_points=1, contact_tolerance=0.0))
+
+
+def test_contact_in_the_last_millimetres_of_the_approach_is_tolerated():
+    """Fingertips meeting the table a few mm before the grasp pose: a guarded approach stops there."""
+    xs, ys = np.meshgrid(np.linspace(-0.05, 0.05, 21), np.linspace(-0.12, 0.12, 49), indexing="ij")
+
+    def table(depth: float) -> np.ndarray:  # the fingertips end ``depth`` below the plane
+        return np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.05 - depth)])
+
+    assert clear(table(-0.003))  # 3 mm short of the table
+    assert clear(table(0.002))  # 2 mm into it: with the 2 mm margin, within the 5 mm tolerance
+    assert not clear(table(0.01))
+    assert not clear(table(0.002), config=ClearanceConfig(contact_tolerance=0.0))
+
+
+def test_the_verdict_does_not_depend_on_the_frame():
+    """Moving the geometry and the grasps by one rigid transform changes no verdict."""
+    rng = np.random.default_rng(3)
+    points = np.vstack(
+        [object_between_the_fingers(), cluster((0.0, 0.047, 0.02)), rng.uniform(-0.2, 0.2, (20, 3))]
+    )
+    rotations = Rotation.random(40, random_state=4)
+    positions = rng.uniform(-0.12, 0.12, (40, 3))
+    local = approach_is_clear(points, positions, rotations.as_quat())
+    assert 0 < local.sum() < 40
+    moved = Rotation.random(random_state=5)
+    shift = np.array([0.3, -0.2, 0.1])
+    world = approach_is_clear(
+        moved.apply(points) + shift, moved.apply(positions) + shift, (moved * rotations).as_quat()
+    )
+    np.testing.assert_array_equal(local, world)
+
+
+def test_the_swept_volume_matches_dense_sampling_of_the_motion():
+    """The exact slab test agrees with the hand placed every 0.5 mm along the approach."""
+    centres, rotations, halves = hand_boxes()
+    points = np.random.default_rng(6).uniform([-0.05, -0.12, -0.13], [0.05, 0.12, 0.07], (4000, 3))
+    swept = np.zeros(len(points), dtype=bool)
+    for offset in np.arange(0.0, PREGRASP_DISTANCE + 1e-9, 0.0005):
+        for centre, rotation, half in zip(centres, rotations, halves, strict=True):
+            in_box = (points + [0.0, 0.0, offset] - centre) @ rotation
+            swept |= np.all(np.abs(in_box) <= half, axis=1)
+    verdicts = np.array([clear([p], config=EXACT) for p in points])
+    disagree = np.flatnonzero(verdicts == swept)  # verdict True means clear, i.e. not swept
+    assert len(disagree) <= 4  # only points within 0.5 mm of a sampled placement may differ
+    assert swept.sum() > 200
+
+
+def test_no_geometry_or_no_grasps():
+    assert clear(np.zeros((0, 3)))
+    assert approach_is_clear(np.zeros((10, 3)), np.zeros((0, 3)), np.zeros((0, 4))).shape == (0,)
+    assert clear_grasps([], np.zeros((10, 3))) == []
+
+
+def test_invalid_settings_are_refused():
+    for bad in ({"margin": -0.001}, {"min_points": 0}, {"opening": 0.1}, {"contact_tolerance": -0.001}):
+        with pytest.raises(ValueError):
+            ClearanceConfig(**bad)
+
+
+# The hand model is the simulator's ----------------------------------------------------------------
+def urdf_boxes(link: str, joint_position: float) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """(centre, half extents, roll) of the link's collision boxes, the finger moved by its joint."""
+    robot = ET.parse(URDF).getroot()
+    shift = {"palm": 0.0, "left_finger": joint_position, "right_finger": -joint_position}[link]
+    boxes = []
+    for collision in robot.find(f"link[@name='{link}']").findall("collision"):
+        origin = collision.find("origin")
+        centre = np.array([float(v) for v in origin.get("xyz").split()]) + [0.0, shift, 0.0]
+        roll = float((origin.get("rpy") or "0 0 0").split()[0])
+        size = np.array([float(v) for v in collision.find("geometry/box").get("size").split()])
+        boxes.append((centre, size / 2, roll))
+    return boxes
+
+
+def test_the_hand_boxes_are_the_urdf_collision_boxes_at_the_max_opening():
+    expected = [
+        *urdf_boxes("palm", 0.0),
+        *urdf_boxes("left_finger", MAX_OPENING / 2),
+        *urdf_boxes("right_finger", MAX_OPENING / 2),
+    ]
+    centres, rotations, halves = hand_boxes(MAX_OPENING)
+    assert len(expected) == len(centres) == 7
+    for (centre, half, roll), c, r, h in zip(expected, centres, rotations, halves, strict=True):
+        np.testing.assert_allclose(c, centre, atol=1e-9)
+        np.testing.assert_allclose(h, half, atol=1e-9)
+        np.testing.assert_allclose(r, Rotation.from_euler("x", roll).as_matrix(), atol=1e-9)
+
+
+def test_the_approach_is_the_executors():
+    pytest.importorskip("pybullet")
+    from sim_worker.grasping import PREGRASP_DISTANCE as EXECUTED_PREGRASP
+    from sim_worker.gripper import GripperSpec
+
+    assert PREGRASP_DISTANCE == EXECUTED_PREGRASP
+    assert GripperSpec().max_opening == MAX_OPENING  # the executor approaches fully open
+
+
+# The grasp option ----------------------------------------------------------------------------------
+# The packaged model: a random network's grasps on the box scene all hit the table or the box.
+@pytest.fixture(scope="module")
+def trained() -> Iterator[PlanningService]:
+    service = PlanningService.from_settings(Settings(model=PACKAGED_MODEL, api_key=None, max_sessions=8))
+    yield service
+    service.close()
+
+
+def fused_session(core: PlanningService, views: int = 6) -> str:
+    session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    scene = BoxScene()
+    for pose in circle_views()[:views]:
+        core.add_frame(session, scene.depth(pose), pose)
+    return session
+
+
+def test_the_core_checks_every_grasp_before_max_grasps(trained):
+    session = fused_session(trained)
+    everything = trained.plan(session, GraspQuery(threshold=0.0))
+    checked = trained.plan(session, GraspQuery(threshold=0.0, clearance=True))
+    assert everything.clearance_dropped is None
+    assert 0 < len(checked.grasps) < len(everything.grasps)
+    assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
+    assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps  # a subset, same order
+    with trained.sessions.use(session) as s:
+        surface = s.volume.surface_points()
+    assert checked.grasps == clear_grasps(everything.grasps, surface)
+    first = trained.plan(session, GraspQuery(threshold=0.0, clearance=True, max_grasps=1))
+    assert first.grasps == checked.grasps[:1]  # the best clear grasp, not the best grasp if it collides
+
+
+def test_the_antipodal_planner_takes_the_option_too(trained):
+    session = fused_session(trained, views=2)
+    everything = trained.plan(session, GraspQuery(planner="antipodal"))
+    checked = trained.plan(session, GraspQuery(planner="antipodal", clearance=True))
+    assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps
+    assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
+
+
+def test_the_option_over_http_and_grpc(trained):
+    """Accepted by both front ends, no change when false, a subset when true, the same answers."""
+    session = fused_session(trained)
+    server, port = build_server(trained, "127.0.0.1", 0)
+    try:
+        with TestClient(create_app(core=trained)) as http, GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
+            url = f"/sessions/{session}/grasps"
+            answers = {
+                value: http.get(
+                    url, params={"threshold": 0.0, **({} if value is None else {"clearance": value})}
+                )
+                for value in (None, "false", "true")
+            }
+            assert all(a.status_code == 200 for a in answers.values())
+            plain, off, on = (GraspResult.model_validate(a.json()) for a in answers.values())
+            assert off.grasps == plain.grasps and off.clearance_dropped is plain.clearance_dropped is None
+            assert on.grasps and len(on.grasps) < len(plain.grasps)
+            assert [g for g in plain.grasps if g in on.grasps] == on.grasps
+            assert on.clearance_dropped == len(plain.grasps) - len(on.grasps)
+            for clearance, expected in ((False, plain), (True, on)):
+                over_grpc = rpc.grasps(session, threshold=0.0, clearance=clearance)
+                assert over_grpc.grasps == expected.grasps
+                assert over_grpc.clearance_dropped == expected.clearance_dropped
+            bad = http.get(url, params={"clearance": "maybe"})
+            assert bad.status_code == 422 and "clearance" in bad.json()["message"]
+            # A bool cannot be invalid on the wire; an invalid request with the option set still is.
+            with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:
+                request = pb.GraspQuery(session_id=session, threshold=2.0, clearance=True)
+                with pytest.raises(grpc.RpcError) as caught:
+                    GraspPlanningStub(channel).GetGrasps(request)
+            assert caught.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+    finally:
+        server.stop(None)
+
+
+def test_the_grpc_message_carries_the_option():
+    message = convert.grasp_query_message("s", GraspQuery(clearance=True))
+    assert message.HasField("clearance") and message.clearance
+    assert not convert.grasp_query_message("s", GraspQuery()).HasField("clearance")
+    assert GraspQuery(**convert.grasp_query_dict(message)).clearance
+
+
+def test_the_client_sends_the_option_only_when_on():
+    assert "clearance" not in GraspQuery().to_params()
+    assert GraspQuery(clearance=True).to_params()["clearance"] == "true"
