@@ -12,7 +12,8 @@ One run measures the p50 and p95 latency (milliseconds) of
 3. uploading a frame over HTTP to a real uvicorn child process (``EmbeddedService``) with
    ``VGNClient.add_frame`` (the bare image as the body, meta in ``X-Frame-Meta``): raw
    float32, and a uint16 millimetre array sent as a 16-bit PNG; and the same float32 frame
-   as a multipart upload, the other form the service accepts;
+   as a multipart upload, the other form the service accepts; and the raw float32 upload
+   33 ms after the previous call (a 30 Hz camera: both processes idle in between);
 4. running VGN *directly* (the baseline): the naive float32 eager forward pass of the network
    as trained (``torch.inference_mode``) on a (1, 1, 40, 40, 40) grid fused from 6 views,
    then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
@@ -131,6 +132,9 @@ RAW_MEDIA_TYPE = "application/octet-stream"
 PNG_MEDIA_TYPE = "image/png"
 
 FRAME_HTTP = "VGNClient.add_frame (raw f32)"
+FRAME_HTTP_PACED = "VGNClient.add_frame (raw f32), 33 ms after the last call"
+#: Idle time before each paced upload: a 30 Hz depth camera.
+CAMERA_PERIOD_S = 1 / 30
 GRASPS_HTTP = "VGNClient.grasps"
 FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
@@ -435,6 +439,11 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
     def raw_frame(k: int) -> None:
         client.add_frame(raw_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
+    paced_id = client.create_session(intrinsics=INTRINSICS).session_id
+
+    def paced_frame(k: int) -> None:
+        client.add_frame(paced_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
     multipart = httpx.Client(base_url=client.url, timeout=60)
     multipart_id = client.create_session(intrinsics=INTRINSICS).session_id
     metas = [
@@ -460,6 +469,9 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
 
     return [
         Operation(FRAME_HTTP, group, raw_frame, "target"),
+        # A camera streaming at 30 Hz leaves both processes idle between frames: caches and
+        # clocks go cold, which a tight loop never shows (and the interleaved schedule only partly).
+        Operation(FRAME_HTTP_PACED, group, paced_frame, "", lambda k: time.sleep(CAMERA_PERIOD_S)),
         Operation("multipart upload (raw f32 part, httpx)", group, multipart_frame),
         Operation("VGNClient.add_frame (PNG16 from uint16 mm)", group, png_frame),
     ]

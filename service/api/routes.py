@@ -39,8 +39,9 @@ RAW_BODY_TYPES = ("application/octet-stream", "image/png")
 PLY_MEDIA_TYPE = "application/x-ply"
 
 
-def core(request: Request) -> PlanningService:
-    """The app's planning core, as a FastAPI dependency."""
+async def core(request: Request) -> PlanningService:
+    """The app's planning core, as a FastAPI dependency. Async because it never blocks: FastAPI
+    runs a plain ``def`` dependency in its thread pool, a thread hop on every request."""
     return request.app.state.core
 
 
@@ -49,12 +50,12 @@ def metrics(request: Request) -> ServiceMetrics:
     return request.app.state.metrics
 
 
-def require_api_key(
+async def require_api_key(
     request: Request,
     x_api_key: Annotated[str | None, Header()] = None,
     authorization: Annotated[str | None, Header()] = None,
 ) -> None:
-    """When ``VGN_API_KEY`` is set, every route but health checks needs it."""
+    """When ``VGN_API_KEY`` is set, every route but health checks needs it (async like ``core``)."""
     expected = request.app.state.settings.api_key
     if expected is None:
         return
