@@ -184,6 +184,18 @@ def report_all(args: argparse.Namespace) -> list[dict]:
     return rows
 
 
+def no_results(out: Path) -> int:
+    """Say that ``--report`` found nothing for its options, and which runs ``out`` does hold; exit 1."""
+    held = sorted(config.parent.name for config in out.glob("*/config.json"))
+    print(
+        f"no results for these options in {out}, table left as it was"
+        + (f"; it holds {', '.join(held)} (a folder suffix -noise, -side or -clearance needs that option)"
+           if held else ""),
+        file=sys.stderr,
+    )  # fmt: skip
+    return 1
+
+
 def format_row(row: dict) -> str:
     """One run on one line, for progress: rounds, success and cleared with intervals, planning time."""
 
@@ -231,7 +243,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     if args.report:
-        return write_table(report_all(args), args)
+        rows = report_all(args)
+        if not rows:  # never replace a table with an empty one: the options likely do not match
+            return no_results(args.out)
+        return write_table(rows, args)
     if args.ray is not None:
         return run_on_ray(args)
     with contextlib.ExitStack() as stack:

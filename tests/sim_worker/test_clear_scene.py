@@ -189,3 +189,7 @@ def test_benchmark_rows_with_the_clearance_check_are_labelled(tmp_path: Path):
     assert json.loads((folder / "config.json").read_text())["clearance"] is True
     assert main(["--report", "--clearance", "--out", str(out)]) == 0
     assert "| antipodal+clearance |" in (out / "table.md").read_text()
+    # Without the option the report finds no run of its own kind: it says so and keeps the table.
+    assert main(["--report", "--out", str(out)]) == 1
+    assert "| antipodal+clearance |" in (out / "table.md").read_text()
+    assert json.loads((out / "table.json").read_text()) == rows
