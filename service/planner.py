@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ import torch
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD, Grasp, GraspQuery
 from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
+from service.runtime import usable_cores
 from service.vgn.batching import MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
@@ -88,15 +90,24 @@ def default_batch_window_ms(device: torch.device) -> float:
     return 2.0 if device.type == "cuda" else 0.0
 
 
+def default_lanes(device: torch.device) -> int:
+    """How many parts of a batch run side by side: on a CPU, one per group of torch threads
+    the usable cores hold (2 cores, 1 thread: 2 lanes), since a batch on few threads costs
+    what its grids cost one by one and torch releases the GIL; a GPU takes a batch whole."""
+    return max(1, usable_cores() // torch.get_num_threads()) if device.type == "cpu" else 1
+
+
 @dataclass(frozen=True)
 class InferenceOptions:
     """How the network runs: ``fast`` (folded, fused heads) or ``reference`` (VGN as
-    trained, float32), its precision, and micro-batching."""
+    trained, float32), its precision, and micro-batching (``lanes``: parts of a batch run
+    side by side; ``None``: :func:`default_lanes`)."""
 
     form: str = "fast"
     precision: str = "auto"
     batch_window_ms: float | None = None
     max_batch: int = 32
+    lanes: int | None = None
 
 
 @dataclass
@@ -137,6 +148,8 @@ class GraspPlanner:
         window_ms = options.batch_window_ms
         self.batch_window_ms = default_batch_window_ms(device) if window_ms is None else window_ms
         self._batcher = MicroBatcher(self._forward_batch, self.batch_window_ms / 1e3, options.max_batch)
+        self.lanes = default_lanes(device) if options.lanes is None else max(1, options.lanes)
+        self._lane_pool = ThreadPoolExecutor(self.lanes, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
 
     @classmethod
     def from_path(
@@ -159,6 +172,7 @@ class GraspPlanner:
             "precision": str(self.dtype).removeprefix("torch."),
             "batch_window_ms": self.batch_window_ms,
             "max_batch": self.options.max_batch,
+            "lanes": self.lanes,
             "batches": self._batcher.stats.as_dict(),
         }
 
@@ -191,11 +205,15 @@ class GraspPlanner:
         return self._batcher.run(np.ascontiguousarray(grid, dtype=np.float32))
 
     def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:
-        """One forward pass over (B, N, N, N) grids."""
+        """One forward pass over (B, N, N, N) grids, split into up to ``lanes`` parts that run
+        side by side (see :func:`default_lanes`)."""
         assert self._network is not None
-        tensor = torch.from_numpy(grids)[:, None].to(self.device)
-        with torch.inference_mode():
-            quality, rotation, width = (t.cpu().numpy() for t in self._network(tensor))
+        lanes = min(len(grids), self.lanes)
+        if lanes > 1 and self._lane_pool is not None:
+            parts = list(self._lane_pool.map(self._forward_tensors, np.array_split(grids, lanes)))
+            quality, rotation, width = (np.concatenate([part[k] for part in parts]) for k in range(3))
+        else:
+            quality, rotation, width = self._forward_tensors(grids)
         if len(grids) == 1:
             return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
         # Copies, so that an output a session keeps does not hold on to the whole batch.
@@ -203,6 +221,13 @@ class GraspPlanner:
             NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
             for b in range(len(grids))
         ]
+
+    def _forward_tensors(self, grids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Quality, rotation and width arrays of one forward pass over (B, N, N, N) grids."""
+        tensor = torch.from_numpy(np.ascontiguousarray(grids))[:, None].to(self.device)
+        with torch.inference_mode():
+            quality, rotation, width = (t.cpu().numpy() for t in self._network(tensor))
+        return quality, rotation, width
 
     def plan(
         self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery

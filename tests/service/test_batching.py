@@ -45,6 +45,34 @@ def test_concurrent_grids_run_as_one_batch_with_the_unbatched_results():
             np.testing.assert_allclose(getattr(batched, name), getattr(single, name), atol=1e-5, rtol=1e-5)
 
 
+@pytest.mark.parametrize("lanes", [2, 3])
+def test_a_batch_split_into_lanes_gives_each_grid_its_own_result(lanes: int):
+    """Parts of a batch run side by side on a CPU; every grid still gets what it gets alone."""
+    grids = [grid for _, grid in recorded_grids()]
+    options = InferenceOptions(precision="fp32", lanes=lanes)
+    planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", options)
+    assert planner.runtime()["lanes"] == lanes
+    split = planner._forward_batch(np.stack(grids))
+    alone = [planner.infer(grid) for grid in grids]
+    assert len(split) == len(grids) > lanes
+    for single, batched in zip(alone, split, strict=True):
+        for name in ("quality", "rotation", "width"):
+            np.testing.assert_allclose(getattr(batched, name), getattr(single, name), atol=1e-5, rtol=1e-5)
+
+
+def test_a_cpu_gets_one_lane_per_group_of_torch_threads(monkeypatch):
+    import torch
+
+    from service import planner
+
+    monkeypatch.setattr(planner, "usable_cores", lambda: 16)
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 8)
+    assert planner.default_lanes(torch.device("cpu")) == 2
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 16)
+    assert planner.default_lanes(torch.device("cpu")) == 1
+    assert planner.default_lanes(torch.device("cuda")) == 1
+
+
 def test_a_failing_forward_reaches_every_waiting_request_and_the_batcher_goes_on():
     calls = []
 
