@@ -5,6 +5,13 @@ one voxel away, turned by at most a few degrees and with nearly the same quality
 Ranks may swap between grasps whose qualities differ by less than the quality tolerance, so
 a counterpart is looked for among all the candidate's grasps, and the candidate's top ``k``
 is checked against the reference's list the same way (both directions).
+
+Where two neighbouring voxels nearly tie, non-maximum suppression may keep one in the
+reference and the other in the candidate: their positions are a voxel apart and their
+qualities agree, but their orientations are those of two different voxels. With
+``neighbour_swaps`` such a pair is excused; the caller must then check that the two networks'
+outputs agree voxel by voxel (:func:`voxelwise_disagreements`), which is what makes the
+swap a tie and not an error.
 """
 
 from __future__ import annotations
@@ -53,19 +60,75 @@ def unmatched(top: Sequence[Grasp], pool: Sequence[Grasp], tolerance: Tolerance)
 
 
 def disagreements(
-    reference: Sequence[Grasp], candidate: Sequence[Grasp], tolerance: Tolerance, k: int = 10
+    reference: Sequence[Grasp],
+    candidate: Sequence[Grasp],
+    tolerance: Tolerance,
+    k: int = 10,
+    neighbour_swaps: bool = False,
 ) -> list[str]:
     """Why the two lists' top ``k`` disagree; empty when they agree. A grasp whose quality
-    is within the tolerance of the cut-off may be missing from the other side's list."""
-
-    def report(top: Sequence[Grasp], pool: Sequence[Grasp], side: str, cutoff: float) -> list[str]:
-        return [
-            f"{side} grasp at {np.round(g.position, 4).tolist()} q={g.quality:.3f} has no counterpart"
-            for g in unmatched(top, pool, tolerance)
-            if g.quality > cutoff + tolerance.quality
-        ]
-
+    is within the tolerance of the cut-off may be missing from the other side's list. With
+    ``neighbour_swaps``, an unmatched reference grasp and an unmatched candidate grasp at most
+    one voxel apart with qualities within the tolerance excuse each other (see the module)."""
     cutoff = lambda grasps: grasps[-1].quality if grasps else 0.0  # noqa: E731
-    return report(reference[:k], candidate, "reference", cutoff(candidate)) + report(
-        candidate[:k], reference, "candidate", cutoff(reference)
-    )
+    missing = [
+        g
+        for g in unmatched(reference[:k], candidate, tolerance)
+        if g.quality > cutoff(candidate) + tolerance.quality
+    ]
+    extra = [
+        g
+        for g in unmatched(candidate[:k], reference, tolerance)
+        if g.quality > cutoff(reference) + tolerance.quality
+    ]
+    if neighbour_swaps:
+        missing, extra = _without_swaps(missing, extra, tolerance)
+
+    def describe(side: str, g: Grasp) -> str:
+        return f"{side} grasp at {np.round(g.position, 4).tolist()} q={g.quality:.3f} has no counterpart"
+
+    return [describe("reference", g) for g in missing] + [describe("candidate", g) for g in extra]
+
+
+def _without_swaps(
+    missing: list[Grasp], extra: list[Grasp], tolerance: Tolerance
+) -> tuple[list[Grasp], list[Grasp]]:
+    """``missing`` and ``extra`` less the pairs that are a neighbour swap (each grasp pairs once)."""
+    left = list(extra)
+    kept = []
+    for g in missing:
+        partner = next(
+            (
+                h
+                for h in left
+                if np.linalg.norm(np.subtract(g.position, h.position)) <= tolerance.position_m + 1e-9
+                and abs(g.quality - h.quality) <= tolerance.quality
+            ),
+            None,
+        )
+        if partner is None:
+            kept.append(g)
+        else:
+            left.remove(partner)
+    return kept, left
+
+
+def voxelwise_disagreements(
+    reference: Sequence[np.ndarray], candidate: Sequence[np.ndarray], mask: np.ndarray, tolerance: Tolerance
+) -> list[str]:
+    """Where two networks' raw outputs (quality (N³), rotation quaternions (4, N³), ...) differ
+    beyond ``tolerance`` at the voxels of ``mask``: quality, and the angle between the
+    orientations (up to the fingers' half-turn, as for grasps). Empty when they agree."""
+    quality_ref, rotation_ref = np.asarray(reference[0])[mask], np.asarray(reference[1])[:, mask].T
+    quality_cand, rotation_cand = np.asarray(candidate[0])[mask], np.asarray(candidate[1])[:, mask].T
+    problems = []
+    worst_quality = float(np.abs(quality_ref - quality_cand).max(initial=0.0))
+    if worst_quality > tolerance.quality:
+        problems.append(f"quality differs by up to {worst_quality:.4f} at the masked voxels")
+    if len(rotation_ref):
+        ra, rb = Rotation.from_quat(rotation_ref), Rotation.from_quat(rotation_cand)
+        flipped = rb * Rotation.from_euler("z", np.pi)
+        angles = np.degrees(np.minimum((ra.inv() * rb).magnitude(), (ra.inv() * flipped).magnitude()))
+        if angles.max() > tolerance.angle_deg:
+            problems.append(f"orientation differs by up to {angles.max():.2f} deg at the masked voxels")
+    return problems
