@@ -83,6 +83,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="ask for grasps whose open hand clears the observed surface on its approach; rows are "
         "labelled PLANNER+clearance and results go to folders ending in -clearance",
     )
+    parser.add_argument(
+        "--turn-average",
+        action="store_true",
+        help="VGN scores averaged over four quarter turns of the grid; its rows are labelled vgn+turns and "
+        "results go to folders ending in -turns (the antipodal planner is unaffected)",
+    )
     parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     parser.add_argument(
@@ -119,6 +125,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
         threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection,
         planner=planner, renderer=args.renderer, noise=args.noise, views=args.views, clearance=args.clearance,
+        turn_average=args.turn_average and planner == "vgn",
     )  # fmt: skip
 
 
@@ -128,14 +135,16 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
         for selection in args.selections:
             for scenario in args.scenarios:
                 suffix = ("-noise" if args.noise else "") + ("-side" if args.views == "side" else "")
+                suffix += "-turns" if args.turn_average and planner == "vgn" else ""
                 suffix += "-clearance" if args.clearance else ""
                 yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}{suffix}"
 
 
 def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
-    """One line of the results table: the run's identity (a planner with the clearance check is
-    ``PLANNER+clearance``), its threshold and model, and its summary."""
-    planner = f"{planner}+clearance" if config.get("clearance") else planner
+    """One line of the results table: the run's identity (VGN with turn averaging is ``vgn+turns``,
+    a planner with the clearance check ``PLANNER+clearance``), its threshold and model, and its summary."""
+    planner += "+turns" if config.get("turn_average") else ""
+    planner += "+clearance" if config.get("clearance") else ""
     return {"planner": planner, "selection": selection, "scenario": scenario,
             "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
 
@@ -189,7 +198,7 @@ def no_results(out: Path) -> int:
     held = sorted(config.parent.name for config in out.glob("*/config.json"))
     print(
         f"no results for these options in {out}, table left as it was"
-        + (f"; it holds {', '.join(held)} (a folder suffix -noise, -side or -clearance needs that option)"
+        + (f"; it holds {', '.join(held)} (a folder suffix -noise, -side, -turns or -clearance needs that option)"
            if held else ""),
         file=sys.stderr,
     )  # fmt: skip

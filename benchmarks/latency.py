@@ -19,7 +19,8 @@ One run measures the p50 and p95 latency (milliseconds) of
    then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
-5. a grasp request in process: ``PlanningService.plan``;
+5. a grasp request in process: ``PlanningService.plan``, plain and with turn averaging (its
+   ratio to the plain request, paired in the same run);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
    so that each runs the network; and without new frames, when the service answers from
    the session's last network output;
@@ -142,6 +143,8 @@ GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
 GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
+PLAN = "PlanningService.plan"
+PLAN_TURNS = "PlanningService.plan, turn averaging"
 
 
 # Measurement -------------------------------------------------------------------------------
@@ -352,7 +355,9 @@ def core_frame_operations(core: PlanningService, frames: Frames) -> list[Operati
     ]
 
 
-def core_plan_operation(core: PlanningService, frames: Frames, query: GraspQuery) -> tuple[Operation, int]:
+def core_plan_operation(
+    core: PlanningService, frames: Frames, query: GraspQuery, name: str = PLAN
+) -> tuple[Operation, int]:
     """``PlanningService.plan`` on a session with every view fused, and its grasp count."""
     session_id = new_session(core)
     for depth, pose in zip(frames.depths, frames.poses, strict=True):
@@ -365,9 +370,7 @@ def core_plan_operation(core: PlanningService, frames: Frames, query: GraspQuery
             core.reset_session(session_id)
         core.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
-    operation = Operation(
-        "PlanningService.plan", "5 grasps in-process", lambda k: core.plan(session_id, query), "", post_frame
-    )
+    operation = Operation(name, "5 grasps in-process", lambda k: core.plan(session_id, query), "", post_frame)
     return operation, grasps
 
 
@@ -783,6 +786,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         )
         network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
+        turns_query = GraspQuery(threshold=THRESHOLD, turn_average=True)
+        plan_turns, _ = core_plan_operation(core, frames, turns_query, PLAN_TURNS)
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
@@ -791,7 +796,7 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, grasps_http, grasps_kept, grasps_again]
+            + [plan, plan_turns, grasps_http, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
@@ -806,6 +811,7 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
+    find(rows, PLAN_TURNS).note = f"{find(rows, PLAN_TURNS).p50 / find(rows, PLAN).p50:.2f}x {PLAN} (paired)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
 

@@ -31,6 +31,10 @@ from client.http import DEFAULT_URL, VGNClient, VGNError
 from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
+TURN_AVERAGE_HELP = (
+    "score grasps by the network's quality averaged over four quarter turns of the grid (VGN only)"
+)
+
 
 def _add_connection(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
@@ -77,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop grasps whose open hand would touch the observed surface on its approach",
     )
+    grasps.add_argument("--turn-average", action="store_true", help=TURN_AVERAGE_HELP)
 
     view = commands.add_parser(
         "view",
@@ -97,6 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
     view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
     view.add_argument("--clearance", action="store_true", help="only grasps whose approach is clear")
+    view.add_argument("--turn-average", action="store_true", help=TURN_AVERAGE_HELP)
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -198,6 +204,9 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
         help="ask for grasps whose open hand clears the observed surface on its approach (recorded in config.json)",
     )
     clear.add_argument(
+        "--turn-average", action="store_true", help=TURN_AVERAGE_HELP + " (recorded in config.json)"
+    )
+    clear.add_argument(
         "--results",
         help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",
     )
@@ -247,7 +256,11 @@ def _sessions(vgn: VGNClient) -> int:
 
 def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
     result = vgn.grasps(
-        args.session_id, threshold=args.threshold, max_grasps=args.top, clearance=args.clearance
+        args.session_id,
+        threshold=args.threshold,
+        max_grasps=args.top,
+        clearance=args.clearance,
+        turn_average=args.turn_average,
     )
     if args.json:
         print(result.model_dump_json(indent=2))
@@ -279,8 +292,9 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
-    if args.clearance:
-        options["clearance"] = True
+    for switch in ("clearance", "turn_average"):
+        if getattr(args, switch):
+            options[switch] = True
     try:
         page = vgn.view_page(args.session_id, **options)
     except ValueError as error:  # the options broke GraspQuery's rules before anything was sent

@@ -184,11 +184,12 @@ class PlanningService:
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
             threshold = config.threshold
         else:
-            reuse = self.settings.reuse_output and kept is not None and kept[0] == revision
-            output = kept[1] if reuse else self.planner.infer(observed)
+            key = (revision, query.turn_average)
+            reuse = self.settings.reuse_output and kept is not None and kept[0] == key
+            output = kept[1] if reuse else self.planner.infer(observed, query.turn_average)
             grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, ranked)
             if self.settings.reuse_output and not reuse:
-                self._keep_output(session_id, revision, output)
+                self._keep_output(session_id, key, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
         dropped = None
@@ -205,13 +206,13 @@ class PlanningService:
             clearance_dropped=dropped,
         )
 
-    def _keep_output(self, session_id: str, revision: int, output: object) -> None:
-        """Keep a session's network output for the next request, unless a frame arrived
-        (or the session went) while the network ran."""
+    def _keep_output(self, session_id: str, key: tuple[int, bool], output: object) -> None:
+        """Keep a session's network output, with the (revision, turn averaging) it was made
+        for, for the next request, unless a frame arrived (or the session went) meanwhile."""
         try:
             with self.sessions.use(session_id) as session:
-                if session.revision == revision:
-                    session.network_output = (revision, output)
+                if session.revision == key[0]:
+                    session.network_output = (key, output)
         except SessionNotFound:
             pass
 

@@ -21,6 +21,7 @@ from service.vgn.checkpoint import card_summary, load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
+from service.vgn.turns import average_turned_quality, turned_grids
 
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 
@@ -149,7 +150,9 @@ class GraspPlanner:
         self.batch_window_ms = default_batch_window_ms(device) if window_ms is None else window_ms
         self._batcher = MicroBatcher(self._forward_batch, self.batch_window_ms / 1e3, options.max_batch)
         self.lanes = default_lanes(device) if options.lanes is None else max(1, options.lanes)
-        self._lane_pool = ThreadPoolExecutor(self.lanes, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
+        self._lane_pool = (
+            ThreadPoolExecutor(self.lanes, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
+        )
 
     @classmethod
     def from_path(
@@ -198,11 +201,21 @@ class GraspPlanner:
         """One forward pass so the first real request does not pay for lazy initialisation."""
         self.infer(np.zeros((resolution,) * 3, dtype=np.float32))
 
-    def infer(self, grid: np.ndarray) -> NetworkOutput:
-        """Network output for one (N, N, N) grid; concurrent calls share forward passes."""
+    def infer(self, grid: np.ndarray, turn_average: bool = False) -> NetworkOutput:
+        """Network output for one (N, N, N) grid; concurrent calls share forward passes.
+
+        With ``turn_average`` the quality is the mean over the grid's four quarter turns about
+        gravity (one batch of four grids; see :mod:`service.vgn.turns`); orientations and
+        widths stay those of the unturned grid, which they are expressed in.
+        """
         if self._network is None:
             raise ModelNotReady(NO_MODEL_MESSAGE)
-        return self._batcher.run(np.ascontiguousarray(grid, dtype=np.float32))
+        grid = np.ascontiguousarray(grid, dtype=np.float32)
+        if not turn_average:
+            return self._batcher.run(grid)
+        outputs = self._batcher.run_many([np.ascontiguousarray(g) for g in turned_grids(grid)])
+        quality = average_turned_quality(np.stack([output.quality for output in outputs]))
+        return NetworkOutput(quality, outputs[0].rotation, outputs[0].width)
 
     def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:
         """One forward pass over (B, N, N, N) grids, split into up to ``lanes`` parts that run
@@ -235,7 +248,7 @@ class GraspPlanner:
         """Grasps for ``grid`` (workspace frame) in the world frame, best first, and the
         time taken in milliseconds; the request's threshold defaults to ``default_threshold``."""
         started = time.perf_counter()
-        grasps = self.detect(grid, self.infer(grid), voxel_size, workspace_pose, query)
+        grasps = self.detect(grid, self.infer(grid, query.turn_average), voxel_size, workspace_pose, query)
         return grasps, (time.perf_counter() - started) * 1e3
 
     def detect(

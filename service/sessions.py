@@ -33,9 +33,9 @@ class Session:
     lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     #: Bumped by every change of the volume (frame, reset): what a kept network output is for.
     revision: int = 0
-    #: (revision, output) of the last forward pass on this session's grid, reused until the
-    #: volume changes (planning again without a new frame costs detection only).
-    network_output: tuple[int, Any] | None = field(default=None, repr=False)
+    #: ((revision, turn averaging), output) of the last forward pass on this session's grid,
+    #: reused until the volume changes (planning again without a new frame costs detection only).
+    network_output: tuple[tuple[int, bool], Any] | None = field(default=None, repr=False)
 
     def reset(self) -> None:
         """Empty the volume and its counts; a kept network output no longer applies."""

@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
         planner=args.planner,
         renderer=args.renderer,
         clearance=getattr(args, "clearance", False),
+        turn_average=getattr(args, "turn_average", False),
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
     results_dir.mkdir(parents=True, exist_ok=True)
@@ -88,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "
         f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {config.model}"
+        + (", turn averaging" if config.turn_average else "")
         + (", clearance check" if config.clearance else "")
     )
     print(summary_table(summary))

@@ -54,6 +54,7 @@ class ClutterConfig:
     renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
     clearance: bool = False  # ask the service to drop grasps whose approach hits observed geometry
+    turn_average: bool = False  # ask VGN for qualities averaged over four quarter turns of the grid
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -71,11 +72,12 @@ class ClutterConfig:
     def as_json(self) -> dict:
         """The settings as stored in the results folder's config.json, which a resume must match.
 
-        ``clearance`` is recorded when on; left out when off, so folders of runs from before
-        the option still resume."""
+        ``clearance`` and ``turn_average`` are recorded when on; left out when off, so folders
+        of runs from before these options still resume."""
         settings = asdict(self)
-        if not self.clearance:
-            del settings["clearance"]
+        for switch in ("clearance", "turn_average"):
+            if not settings[switch]:
+                del settings[switch]
         return settings
 
 
@@ -143,6 +145,7 @@ class ClutterRemoval:
                 threshold=self.config.threshold,
                 planner=self.config.planner,
                 clearance=self.config.clearance,
+                turn_average=self.config.turn_average,
             )
             client_ms = (time.perf_counter() - client_started) * 1e3
             if not answer.grasps:

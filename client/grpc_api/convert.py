@@ -99,7 +99,7 @@ def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
     """A ``GraspQuery`` dict with vectors as 'x,y,z' text, so the HTTP rules apply; an unknown planner is
     passed on for the schema to refuse."""
     data = optional_fields(
-        message, ("threshold", "max_grasps", "nms_size", "max_approach_angle", "clearance")
+        message, ("threshold", "max_grasps", "nms_size", "max_approach_angle", "clearance", "turn_average")
     )
     data["planner"] = PLANNER_NAMES.get(message.planner, f"unknown planner {message.planner}")
     for name in ("crop_min", "crop_max", "approach"):
@@ -181,6 +181,8 @@ def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
     message.nms_size = query.nms_size
     if query.clearance:
         message.clearance = True
+    if query.turn_average:
+        message.turn_average = True
     crop_min, crop_max = query.crop_box or (None, None)
     for name, values in (
         ("crop_min", crop_min),

@@ -186,7 +186,7 @@ class StreamFramesResult(_message.Message):
     def __init__(self, session_id: _Optional[str] = ..., frames_received: _Optional[int] = ..., frame_count: _Optional[int] = ..., integration_ms: _Optional[float] = ...) -> None: ...
 
 class GraspQuery(_message.Message):
-    __slots__ = ("session_id", "planner", "threshold", "max_grasps", "nms_size", "crop_min", "crop_max", "approach", "max_approach_angle", "clearance")
+    __slots__ = ("session_id", "planner", "threshold", "max_grasps", "nms_size", "crop_min", "crop_max", "approach", "max_approach_angle", "clearance", "turn_average")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     PLANNER_FIELD_NUMBER: _ClassVar[int]
     THRESHOLD_FIELD_NUMBER: _ClassVar[int]
@@ -197,6 +197,7 @@ class GraspQuery(_message.Message):
     APPROACH_FIELD_NUMBER: _ClassVar[int]
     MAX_APPROACH_ANGLE_FIELD_NUMBER: _ClassVar[int]
     CLEARANCE_FIELD_NUMBER: _ClassVar[int]
+    TURN_AVERAGE_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     planner: Planner
     threshold: float
@@ -207,7 +208,8 @@ class GraspQuery(_message.Message):
     approach: Vector3
     max_approach_angle: float
     clearance: bool
-    def __init__(self, session_id: _Optional[str] = ..., planner: _Optional[_Union[Planner, str]] = ..., threshold: _Optional[float] = ..., max_grasps: _Optional[int] = ..., nms_size: _Optional[int] = ..., crop_min: _Optional[_Union[Vector3, _Mapping]] = ..., crop_max: _Optional[_Union[Vector3, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., max_approach_angle: _Optional[float] = ..., clearance: _Optional[bool] = ...) -> None: ...
+    turn_average: bool
+    def __init__(self, session_id: _Optional[str] = ..., planner: _Optional[_Union[Planner, str]] = ..., threshold: _Optional[float] = ..., max_grasps: _Optional[int] = ..., nms_size: _Optional[int] = ..., crop_min: _Optional[_Union[Vector3, _Mapping]] = ..., crop_max: _Optional[_Union[Vector3, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., max_approach_angle: _Optional[float] = ..., clearance: _Optional[bool] = ..., turn_average: _Optional[bool] = ...) -> None: ...
 
 class Grasp(_message.Message):
     __slots__ = ("position", "orientation", "approach", "width", "quality")

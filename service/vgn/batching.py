@@ -68,13 +68,19 @@ class MicroBatcher:
 
     def run(self, grid: np.ndarray) -> Any:
         """The output for one grid, from a forward pass it may share with others."""
-        future: Future = Future()
-        self._queue.put((grid, future))
-        while not future.done():
+        return self.run_many([grid])[0]
+
+    def run_many(self, grids: list[np.ndarray]) -> list[Any]:
+        """The outputs for several grids of one request, queued together so that they share
+        a forward pass (with each other and with concurrent requests)."""
+        futures: list[Future] = [Future() for _ in grids]
+        for grid, future in zip(grids, futures, strict=True):
+            self._queue.put((grid, future))
+        while not all(future.done() for future in futures):
             with self._turn:
-                while self._leading and not future.done():
+                while self._leading and not all(future.done() for future in futures):
                     self._turn.wait()
-                if future.done():
+                if all(future.done() for future in futures):
                     break
                 self._leading = True
             try:
@@ -83,7 +89,7 @@ class MicroBatcher:
                 with self._turn:
                     self._leading = False
                     self._turn.notify_all()
-        return future.result()
+        return [future.result() for future in futures]
 
     def _collect(self) -> list[tuple[np.ndarray, Future]]:
         """What is queued, and what arrives within the window, up to ``max_batch``."""

@@ -168,6 +168,38 @@ def test_clear_scene_records_the_clearance_option(server, tmp_path: Path):
     assert "clearance check" in run.stdout
 
 
+def test_clear_scene_records_turn_averaging(server, tmp_path: Path):
+    results = tmp_path / "turns"
+    run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
+                      "--turn-average", "--results", str(results))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    check_results(results, 1)
+    assert json.loads((results / "config.json").read_text())["turn_average"] is True
+    assert "turn averaging" in run.stdout
+
+
+def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
+    """Only VGN runs take the option: their folders end in -turns and their rows read vgn+turns."""
+    from benchmarks.clutter import combinations, parse_args, scenario_config, table_row
+    from sim_worker.clutter import ClutterConfig
+
+    args = parse_args(["--planners", "vgn", "antipodal", "--selections", "random", "--scenarios", "pile-5",
+                       "--turn-average", "--clearance", "--out", str(tmp_path)])  # fmt: skip
+    runs = {planner: folder.name for planner, _, _, folder in combinations(args)}
+    assert runs == {
+        "vgn": "vgn-random-pile-5-turns-clearance",
+        "antipodal": "antipodal-random-pile-5-clearance",
+    }
+    vgn, antipodal = (scenario_config(args, planner, "random", "pile-5") for planner in ("vgn", "antipodal"))
+    assert vgn.turn_average and not antipodal.turn_average
+    assert "turn_average" not in ClutterConfig().as_json()
+    assert table_row("vgn", "random", "pile-5", vgn.as_json(), {})["planner"] == "vgn+turns+clearance"
+    assert (
+        table_row("antipodal", "random", "pile-5", antipodal.as_json(), {})["planner"]
+        == "antipodal+clearance"
+    )
+
+
 def test_configs_without_the_clearance_check_keep_their_recorded_form():
     """Off, the option is left out of config.json, so results folders from before it still resume."""
     from sim_worker.clutter import ClutterConfig

@@ -1,0 +1,153 @@
+"""Turn averaging: VGN's quality averaged over the grid's four quarter turns about gravity,
+mapped back with the training augmentation's rule, run as one batch, and kept apart from
+plain outputs when a session's output is reused."""
+
+from __future__ import annotations
+
+import threading
+
+import httpx
+import numpy as np
+import pytest
+import torch
+
+from client.grpc_client import GRPCClient
+from client.schemas import GraspQuery, GraspResult, SessionCreate
+from service.core import PlanningService
+from service.grpc.server import build_server
+from service.planner import GraspPlanner, InferenceOptions
+from service.settings import PACKAGED_MODEL
+from service.training.augment import rotate_z
+from service.training.labels import LabelSet
+from service.vgn.batching import MicroBatcher
+from service.vgn.turns import TURNS, average_turned_quality, turned_grids, turned_index
+from tests.helpers.grids import recorded_grids
+from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+
+N = 8
+
+
+@pytest.mark.parametrize("quarter_turns", [1, 2, 3])
+def test_outputs_move_as_the_training_augmentation_moves_labels(quarter_turns: int):
+    """The network learnt with labels turned by ``rotate_z``; reading its outputs back must use
+    the same rule, or every averaged score would mix neighbouring voxels."""
+    i, j, z = np.meshgrid(np.arange(N), np.arange(N), [3], indexing="ij")
+    voxel = torch.from_numpy(np.stack([i.ravel(), j.ravel(), z.ravel()], axis=1))
+    quaternion = torch.tensor([[0.0, 0.0, 0.0, 1.0]]).expand(len(voxel), 4)
+    labels = LabelSet(voxel, quaternion, torch.ones(len(voxel)), torch.ones(len(voxel)))
+    _, turned = rotate_z(torch.zeros((N, N, N)), labels, quarter_turns)
+    to_i, to_j = turned_index(N, quarter_turns)
+    on_grid = (to_i >= 0) & (to_i < N) & (to_j >= 0) & (to_j < N)
+    expected = sorted(zip(to_i[on_grid].tolist(), to_j[on_grid].tolist(), strict=True))
+    assert sorted(map(tuple, turned.voxel[:, :2].tolist())) == expected
+    kept = N * (N - 1) if quarter_turns % 2 else (N - 1) ** 2
+    assert on_grid.sum() == kept, "a turn takes the positions of one row (a half turn: and one column) off"
+
+
+def test_a_network_that_turns_with_the_scene_keeps_its_scores():
+    """Qualities that follow the turn exactly average back to the unturned ones, and positions a
+    turn takes off the grid never borrow a score."""
+    rng = np.random.default_rng(0)
+    quality = rng.random((N, N, N)).astype(np.float32)
+    turned = np.full((len(TURNS), N, N, N), 7.0, dtype=np.float32)  # 7: a score no turn may read
+    for k in TURNS:
+        to_i, to_j = turned_index(N, k)
+        on_grid = (to_i >= 0) & (to_i < N) & (to_j >= 0) & (to_j < N)
+        turned[k][to_i[on_grid], to_j[on_grid]] = quality[on_grid]
+    np.testing.assert_allclose(average_turned_quality(turned), quality, rtol=1e-6)
+
+
+def test_the_grids_are_turned_about_z():
+    grid = np.zeros((N, N, N), dtype=np.float32)
+    grid[1, 0, 5] = 1.0  # a cell on the +x side, at height 5
+    turned = turned_grids(grid)
+    cells = [tuple(np.argwhere(g)[0]) for g in turned]
+    assert cells == [(1, 0, 5), (N - 1, 1, 5), (N - 2, N - 1, 5), (0, N - 2, 5)]
+
+
+def test_a_request_queues_its_grids_together_and_gets_them_back_in_order():
+    sizes = []
+
+    def forward(grids: np.ndarray) -> list[float]:
+        sizes.append(len(grids))
+        return [float(g.sum()) for g in grids]
+
+    batcher = MicroBatcher(forward)
+    grids = [np.full((2, 2, 2), value, np.float32) for value in (1, 2, 3, 4)]
+    assert batcher.run_many(grids) == [8.0, 16.0, 24.0, 32.0]
+    assert sizes == [4], "the four grids of one request share one forward pass"
+
+    results: list[list[float]] = []
+    threads = [threading.Thread(target=lambda: results.append(batcher.run_many(grids))) for _ in range(3)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert results == [[8.0, 16.0, 24.0, 32.0]] * 3
+
+
+def test_the_planner_averages_the_shipped_models_quality_over_the_turns():
+    planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32", lanes=1))
+    _, grid = recorded_grids()[0]
+    plain = planner.infer(grid)
+    averaged = planner.infer(grid, turn_average=True)
+    one_by_one = np.stack([planner.infer(np.ascontiguousarray(g)).quality for g in turned_grids(grid)])
+    np.testing.assert_allclose(averaged.quality, average_turned_quality(one_by_one), atol=1e-5)
+    # Orientations and widths are the unturned grid's (from a batch of four: float32 rounding apart).
+    np.testing.assert_allclose(averaged.rotation, plain.rotation, atol=1e-5)
+    np.testing.assert_allclose(averaged.width, plain.width, atol=1e-4)
+    assert not np.allclose(averaged.quality, plain.quality, atol=1e-3), "the turns disagree somewhere"
+    assert planner.runtime()["batches"]["largest"] == len(TURNS)
+
+
+def test_a_kept_output_serves_only_requests_with_the_same_averaging(core: PlanningService):
+    session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    scene = BoxScene()
+    for pose in circle_views(3):
+        core.add_frame(session, scene.depth(pose), pose)
+    plain, averaged = GraspQuery(threshold=0.0), GraspQuery(threshold=0.0, turn_average=True)
+    first_plain = core.plan(session, plain).grasps
+    first_averaged = core.plan(session, averaged).grasps
+    assert first_averaged != first_plain
+    assert core.plan(session, plain).grasps == first_plain
+    assert core.plan(session, averaged).grasps == first_averaged
+
+
+def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsys):
+    """A real server takes ``turn_average`` as a query switch (a bad value is a 422 naming it),
+    the gRPC front end gives the same grasps as the core, and ``vgn-client grasps`` passes it on."""
+    from client.cli import main
+
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    scene = BoxScene()
+    for pose in circle_views(3):
+        vgn.add_frame(session, scene.depth(pose), pose)
+    plain = vgn.grasps(session, threshold=0.0)
+    averaged = vgn.grasps(session, threshold=0.0, turn_average=True)
+    assert averaged.grasps and averaged.grasps != plain.grasps
+    assert vgn.grasps(session, threshold=0.0, turn_average=False).grasps == plain.grasps
+    bad = httpx.get(f"{vgn.url}/sessions/{session}/grasps", params={"turn_average": "maybe"})
+    assert bad.status_code == 422 and "turn_average" in bad.json()["message"]
+
+    assert main(["grasps", session, "--url", vgn.url, "--threshold", "0", "--turn-average", "--json"]) == 0
+    assert GraspResult.model_validate_json(capsys.readouterr().out).grasps == averaged.grasps[:10]
+
+    local = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    for pose in circle_views(3):
+        core.add_frame(local, scene.depth(pose), pose)
+    server, port = build_server(core, "127.0.0.1", 0)
+    try:
+        with GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
+            for turn_average in (False, True):
+                expected = core.plan(local, GraspQuery(threshold=0.0, turn_average=turn_average))
+                assert rpc.grasps(local, threshold=0.0, turn_average=turn_average).grasps == expected.grasps
+    finally:
+        server.stop(None)
+
+
+def test_average_precision_of_the_label_benchmark():
+    from benchmarks.turn_average import average_precision
+
+    assert average_precision(np.array([1, 1, 0, 0]), np.array([0.9, 0.8, 0.2, 0.1])) == 1.0
+    # Positives ranked 1st and 3rd: precisions 1 and 2/3.
+    assert average_precision(np.array([1, 0, 1, 0]), np.array([0.9, 0.8, 0.7, 0.1])) == pytest.approx(5 / 6)
