@@ -86,7 +86,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--turn-average",
         action="store_true",
-        help="VGN scores averaged over four quarter turns of the grid; its rows are labelled vgn+turns and "
+        help="VGN scores and orientations averaged over four quarter turns of the grid; its rows are labelled vgn+turns and "
         "results go to folders ending in -turns (the antipodal planner is unaffected)",
     )
     parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")

@@ -1,5 +1,6 @@
 """Turn averaging on labelled validation scenes: does the mean quality over the grid's four
-quarter turns rank VGN's labelled grasps better than the quality of the unturned grid?
+quarter turns rank VGN's labelled grasps better than the quality of the unturned grid, and is
+the mean orientation nearer the successful grasps' orientations?
 
     python -m benchmarks.turn_average --data data [--model WEIGHTS] [--scenes 200]
 
@@ -16,10 +17,12 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.training.dataset import load_scenes, split_scenes
+from service.training.metrics import rotation_error_deg
 from service.training.train import TrainConfig
 
 THRESHOLDS = (0.7, 0.8, 0.9)
@@ -64,11 +67,19 @@ def main(argv: list[str] | None = None) -> int:
     planner = GraspPlanner.from_path(args.model, "cpu", InferenceOptions(precision="fp32"))
     labels, sources = [], []
     scores: dict[str, list[np.ndarray]] = {"plain": [], "turns": []}
+    errors: dict[str, list[np.ndarray]] = {"plain": [], "turns": []}
     for scene in validation:
         grid = scene.source.load()
         at_labels = tuple(scene.labels.voxel.numpy().T)
-        scores["plain"].append(planner.infer(grid).quality[at_labels])
-        scores["turns"].append(planner.infer(grid, turn_average=True).quality[at_labels])
+        positive = scene.labels.label.numpy() == 1
+        target = scene.labels.quaternion[positive]
+        for form, output in (
+            ("plain", planner.infer(grid)),
+            ("turns", planner.infer(grid, turn_average=True)),
+        ):
+            scores[form].append(output.quality[at_labels])
+            predicted = torch.from_numpy(output.rotation[(slice(None), *at_labels)].T[positive].copy())
+            errors[form].append(rotation_error_deg(predicted, target).numpy())
         labels.append(scene.labels.label.numpy())
         sources.append(np.full(len(scene.labels), scene.scene_id.split("-")[0]))
     label = np.concatenate(labels)
@@ -76,6 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     score = {form: np.concatenate(values) for form, values in scores.items()}
     print(f"model {planner.model_id}, {len(validation)} validation scenes of {args.data}")
     report("all", label, score)
+    for form, values in errors.items():
+        error = np.concatenate(values)
+        print(
+            f"  {form:8s} orientation error at the {len(error)} positives: mean {error.mean():.1f}°, "
+            f"median {np.median(error):.1f}°, within 20° {np.mean(error < 20):.3f}"
+        )
     for name in sorted(set(source)):
         keep = source == name
         report(f"scenes {name}-*", label[keep], {form: values[keep] for form, values in score.items()})

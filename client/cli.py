@@ -32,7 +32,7 @@ from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
 TURN_AVERAGE_HELP = (
-    "score grasps by the network's quality averaged over four quarter turns of the grid (VGN only)"
+    "score and orient grasps by the network's outputs averaged over four quarter turns of the grid (VGN only)"
 )
 
 

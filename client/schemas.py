@@ -264,8 +264,8 @@ class GraspQuery(_Model):
         default=False,
         description="vgn only: score each grasp by the network's quality averaged over the grid "
         "turned by 0, 90, 180 and 270 degrees about the workspace z axis (the turns VGN trains "
-        "with); four grids in one batch, about 2.5x the time of a plain request on 2 CPU cores; orientations "
-        "and widths stay those of the unturned grid",
+        "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 3x the "
+        "time of a plain request on 2 CPU cores; widths stay those of the unturned grid",
     )
 
     @field_validator("crop_min", "crop_max", "approach", mode="before")

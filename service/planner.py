@@ -21,7 +21,7 @@ from service.vgn.checkpoint import card_summary, load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
-from service.vgn.turns import average_turned_quality, turned_grids
+from service.vgn.turns import average_turned_quality, average_turned_rotation, turned_grids
 
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 
@@ -204,9 +204,9 @@ class GraspPlanner:
     def infer(self, grid: np.ndarray, turn_average: bool = False) -> NetworkOutput:
         """Network output for one (N, N, N) grid; concurrent calls share forward passes.
 
-        With ``turn_average`` the quality is the mean over the grid's four quarter turns about
-        gravity (one batch of four grids; see :mod:`service.vgn.turns`); orientations and
-        widths stay those of the unturned grid, which they are expressed in.
+        With ``turn_average`` quality and orientation are the means over the grid's four
+        quarter turns about gravity (one batch of four grids; see :mod:`service.vgn.turns`);
+        widths stay those of the unturned grid.
         """
         if self._network is None:
             raise ModelNotReady(NO_MODEL_MESSAGE)
@@ -215,7 +215,8 @@ class GraspPlanner:
             return self._batcher.run(grid)
         outputs = self._batcher.run_many([np.ascontiguousarray(g) for g in turned_grids(grid)])
         quality = average_turned_quality(np.stack([output.quality for output in outputs]))
-        return NetworkOutput(quality, outputs[0].rotation, outputs[0].width)
+        rotation = average_turned_rotation(np.stack([output.rotation for output in outputs]))
+        return NetworkOutput(quality, rotation, outputs[0].width)
 
     def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:
         """One forward pass over (B, N, N, N) grids, split into up to ``lanes`` parts that run

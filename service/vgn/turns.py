@@ -1,16 +1,18 @@
-"""Turn averaging: VGN's grasp quality averaged over the grid turned about gravity.
+"""Turn averaging: VGN's grasp quality and orientation averaged over the grid turned about gravity.
 
 VGN trains with the scene turned by quarter turns about the workspace z axis, so a well
-trained network scores a grasp the same whichever way the scene is turned; where it does
-not, the four scores disagree and their mean is the steadier estimate. Turning the grid is
+trained network scores and orients a grasp the same whichever way the scene is turned; where
+it does not, the four answers disagree and their mean is the steadier estimate. Turning the grid is
 ``np.rot90`` over its x, y axes. Network outputs sit at grasp positions ``index × voxel``
 (docs/conventions.md), which a quarter turn about the workspace centre takes from (i, j) to
 (N - j, i): one index away from where ``rot90`` moves the grid's cells, the same rule the
 training augmentation applies to its labels. Voxels that a turn takes off the grid (one
-row per turn) keep the scores of the turns that keep them.
+row per turn) keep the answers of the turns that keep them.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -44,3 +46,36 @@ def average_turned_quality(qualities: np.ndarray) -> np.ndarray:
         total[on_grid] += quality[i[on_grid], j[on_grid]]
         count[on_grid] += 1.0
     return (total / count).astype(qualities.dtype)
+
+
+def average_turned_rotation(rotations: np.ndarray) -> np.ndarray:
+    """(4, N, N, N) mean grasp orientation, in the unturned grid's frame and voxels, of
+    (4, 4, N, N, N) network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`.
+
+    Each turn's quaternion is read at the turned grasp position and turned back about z. A
+    quaternion and its negative are one rotation, and a grasp turned by π about its approach is
+    the same grasp, so each is first replaced by whichever of those four forms lies nearest the
+    unturned grid's own prediction; the mean of the aligned forms, normalised, is the result.
+    """
+    n = rotations.shape[2]
+    reference = rotations[0]
+    total = reference.astype(np.float32, copy=True)
+    for k in TURNS[1:]:
+        i, j = turned_index(n, k)
+        on_grid = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+        x, y, z, w = np.zeros_like(total)
+        for part, row in zip((x, y, z, w), rotations[k], strict=True):
+            part[on_grid] = row[i[on_grid], j[on_grid]]
+        # Turned back: about_z(-k π/2) ⊗ q, written out (the rotation has only z and w parts).
+        sine, cosine = math.sin(-k * math.pi / 4), math.cos(-k * math.pi / 4)
+        back = np.stack(
+            [cosine * x - sine * y, cosine * y + sine * x, cosine * z + sine * w, cosine * w - sine * z]
+        )
+        turned_about_approach = np.stack([back[1], -back[0], back[3], -back[2]])  # back ⊗ [0, 0, 1, 0]
+        plain_agreement = np.einsum("q...,q...->...", back, reference)
+        turned_agreement = np.einsum("q...,q...->...", turned_about_approach, reference)
+        use_turned = np.abs(turned_agreement) > np.abs(plain_agreement)
+        chosen = np.where(use_turned, turned_about_approach, back)
+        sign = np.sign(np.where(use_turned, turned_agreement, plain_agreement))
+        total += chosen * sign
+    return total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)

@@ -4,6 +4,7 @@ plain outputs when a session's output is reused."""
 
 from __future__ import annotations
 
+import math
 import threading
 
 import httpx
@@ -19,8 +20,15 @@ from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.training.augment import rotate_z
 from service.training.labels import LabelSet
+from service.training.quaternions import about_z, flipped, multiply
 from service.vgn.batching import MicroBatcher
-from service.vgn.turns import TURNS, average_turned_quality, turned_grids, turned_index
+from service.vgn.turns import (
+    TURNS,
+    average_turned_quality,
+    average_turned_rotation,
+    turned_grids,
+    turned_index,
+)
 from tests.helpers.grids import recorded_grids
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
@@ -86,15 +94,17 @@ def test_a_request_queues_its_grids_together_and_gets_them_back_in_order():
     assert results == [[8.0, 16.0, 24.0, 32.0]] * 3
 
 
-def test_the_planner_averages_the_shipped_models_quality_over_the_turns():
+def test_the_planner_averages_the_shipped_models_outputs_over_the_turns():
     planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32", lanes=1))
     _, grid = recorded_grids()[0]
     plain = planner.infer(grid)
     averaged = planner.infer(grid, turn_average=True)
-    one_by_one = np.stack([planner.infer(np.ascontiguousarray(g)).quality for g in turned_grids(grid)])
-    np.testing.assert_allclose(averaged.quality, average_turned_quality(one_by_one), atol=1e-5)
-    # Orientations and widths are the unturned grid's (from a batch of four: float32 rounding apart).
-    np.testing.assert_allclose(averaged.rotation, plain.rotation, atol=1e-5)
+    one_by_one = [planner.infer(np.ascontiguousarray(g)) for g in turned_grids(grid)]
+    qualities = np.stack([output.quality for output in one_by_one])
+    rotations = np.stack([output.rotation for output in one_by_one])
+    np.testing.assert_allclose(averaged.quality, average_turned_quality(qualities), atol=1e-5)
+    np.testing.assert_allclose(averaged.rotation, average_turned_rotation(rotations), atol=1e-4)
+    # Widths are the unturned grid's (from a batch of four: float32 rounding apart).
     np.testing.assert_allclose(averaged.width, plain.width, atol=1e-4)
     assert not np.allclose(averaged.quality, plain.quality, atol=1e-3), "the turns disagree somewhere"
     assert planner.runtime()["batches"]["largest"] == len(TURNS)
@@ -151,3 +161,47 @@ def test_average_precision_of_the_label_benchmark():
     assert average_precision(np.array([1, 1, 0, 0]), np.array([0.9, 0.8, 0.2, 0.1])) == 1.0
     # Positives ranked 1st and 3rd: precisions 1 and 2/3.
     assert average_precision(np.array([1, 0, 1, 0]), np.array([0.9, 0.8, 0.7, 0.1])) == pytest.approx(5 / 6)
+
+
+def _random_rotations(rng: np.random.Generator) -> np.ndarray:
+    q = rng.normal(size=(4, N, N, N)).astype(np.float32)
+    return q / np.linalg.norm(q, axis=0)
+
+
+def test_orientations_that_turn_with_the_scene_average_back_to_the_unturned_ones():
+    """A network that turns its grasps with the scene, in any of a grasp's four equivalent forms
+    (q, -q, q turned by π about the approach, and its negative), averages back exactly to the
+    unturned orientation; the turn back uses the training's quaternion algebra."""
+    rng = np.random.default_rng(1)
+    reference = _random_rotations(rng)
+    turned = np.stack([reference] + [_random_rotations(rng) for _ in TURNS[1:]])  # off-grid: noise
+    as_rows = torch.from_numpy(np.moveaxis(reference, 0, -1))
+    for k in TURNS[1:]:
+        rotated = multiply(about_z(k * math.pi / 2).expand_as(as_rows), as_rows)
+        form = rng.integers(0, 4, size=(N, N, N))
+        rotated = torch.where(torch.from_numpy(form % 2 == 1)[..., None], flipped(rotated), rotated)
+        rotated = torch.where(torch.from_numpy(form >= 2)[..., None], -rotated, rotated)
+        to_i, to_j = turned_index(N, k)
+        on_grid = (to_i >= 0) & (to_i < N) & (to_j >= 0) & (to_j < N)
+        for axis in range(4):
+            turned[k, axis][to_i[on_grid], to_j[on_grid]] = rotated[..., axis].numpy()[on_grid]
+    np.testing.assert_allclose(average_turned_rotation(turned), reference, atol=1e-5)
+
+
+def test_the_averaged_orientation_lies_between_disagreeing_turns():
+    """Two turns 20° apart about x on either side of the unturned one: the mean is the unturned."""
+    reference = np.zeros((4, N, N, N), np.float32)
+    reference[3] = 1.0
+    tilt = math.radians(20.0)
+    tilted = [np.zeros_like(reference) for _ in range(2)]
+    for sign, field in zip((1, -1), tilted, strict=True):
+        field[0], field[3] = sign * math.sin(tilt / 2), math.cos(tilt / 2)
+    # A tilt about x, seen after a quarter turn about z, is a tilt about y (and so on); with
+    # these two tilts opposite and the half turn agreeing, the mean is the identity.
+    first = multiply(about_z(math.pi / 2), torch.from_numpy(np.moveaxis(tilted[0], 0, -1)))
+    third = multiply(about_z(3 * math.pi / 2), torch.from_numpy(np.moveaxis(tilted[1], 0, -1)))
+    half = multiply(about_z(math.pi), torch.from_numpy(np.moveaxis(reference, 0, -1)))
+    turned = np.stack([reference] + [np.moveaxis(t.numpy(), -1, 0) for t in (first, half, third)])
+    averaged = average_turned_rotation(turned)
+    inside = (slice(None), slice(1, N - 1), slice(1, N - 1))  # every turn keeps these voxels
+    np.testing.assert_allclose(np.abs(averaged[inside][3]), 1.0, atol=1e-6)
