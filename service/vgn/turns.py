@@ -2,12 +2,12 @@
 
 VGN trains with the scene turned by quarter turns about the workspace z axis, so a well
 trained network scores and orients a grasp the same whichever way the scene is turned; where
-it does not, the four answers disagree and their mean is the steadier estimate. Turning the grid is
-``np.rot90`` over its x, y axes. Network outputs sit at grasp positions ``index × voxel``
+it does not, the four answers disagree and their mean is the steadier estimate. Turning the
+grid is ``np.rot90`` over its x, y axes. Network outputs sit at grasp positions ``index × voxel``
 (docs/conventions.md), which a quarter turn about the workspace centre takes from (i, j) to
 (N - j, i): one index away from where ``rot90`` moves the grid's cells, the same rule the
-training augmentation applies to its labels. Voxels that a turn takes off the grid (one
-row per turn) keep the answers of the turns that keep them.
+training augmentation applies to its labels. Voxels that a turn takes off the grid (a row;
+for the half turn a row and a column) keep the answers of the turns that keep them.
 """
 
 from __future__ import annotations
