@@ -811,7 +811,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
-    find(rows, PLAN_TURNS).note = f"{find(rows, PLAN_TURNS).p50 / find(rows, PLAN).p50:.2f}x {PLAN} (paired)"
+    plan_turns = find(rows, PLAN_TURNS)
+    plan_turns.note = f"{plan_turns.p50 / find(rows, PLAN).p50:.2f}x {PLAN} (paired)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
 

@@ -213,7 +213,7 @@ class GraspPlanner:
         grid = np.ascontiguousarray(grid, dtype=np.float32)
         if not turn_average:
             return self._batcher.run(grid)
-        outputs = self._batcher.run_many([np.ascontiguousarray(g) for g in turned_grids(grid)])
+        outputs = self._batcher.run_many(list(turned_grids(grid)))  # rows of one stacked array: contiguous
         quality = average_turned_quality(np.stack([output.quality for output in outputs]))
         rotation = average_turned_rotation(np.stack([output.rotation for output in outputs]))
         return NetworkOutput(quality, rotation, outputs[0].width)

@@ -158,24 +158,18 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
 
 
-def test_clear_scene_records_the_clearance_option(server, tmp_path: Path):
-    results = tmp_path / "clearance"
+@pytest.mark.parametrize(
+    ("option", "recorded", "said"),
+    [("--clearance", "clearance", "clearance check"), ("--turn-average", "turn_average", "turn averaging")],
+)
+def test_clear_scene_records_its_grasp_options(server, tmp_path: Path, option: str, recorded: str, said: str):
+    results = tmp_path / recorded
     run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
-                      "--clearance", "--results", str(results))  # fmt: skip
+                      option, "--results", str(results))  # fmt: skip
     assert run.returncode == 0, run.stderr
     check_results(results, 1)
-    assert json.loads((results / "config.json").read_text())["clearance"] is True
-    assert "clearance check" in run.stdout
-
-
-def test_clear_scene_records_turn_averaging(server, tmp_path: Path):
-    results = tmp_path / "turns"
-    run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
-                      "--turn-average", "--results", str(results))  # fmt: skip
-    assert run.returncode == 0, run.stderr
-    check_results(results, 1)
-    assert json.loads((results / "config.json").read_text())["turn_average"] is True
-    assert "turn averaging" in run.stdout
+    assert json.loads((results / "config.json").read_text())[recorded] is True
+    assert said in run.stdout
 
 
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
