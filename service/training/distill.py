@@ -5,8 +5,10 @@ passes a request. Training a network to give that averaged answer in one pass mo
 into the weights. The teacher is a trained model run on each training scene turned by 0°, 90°,
 180° and 270°; its averaged quality, orientation and (unturned) width become soft labels at every
 voxel of the scene where detection may place a grasp (``grasp_region``), not only at the ~100
-voxels with trial labels. Because the average is the same whichever way the scene is turned,
-the soft labels follow the training augmentation exactly like trial labels do.
+voxels with trial labels. The soft labels are moved with the training augmentation like trial
+labels. The averaged quality is the same whichever way the scene is turned; the averaged
+orientation nearly so (it is aligned to the unturned grid's prediction, which matters where the
+four turns disagree).
 """
 
 from __future__ import annotations
