@@ -13,6 +13,7 @@ labels that leave the grid.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -26,11 +27,18 @@ MAX_Z_SHIFT = 4
 
 def rotate_z(grid: torch.Tensor, labels: LabelSet, quarter_turns: int) -> tuple[torch.Tensor, LabelSet]:
     """Turn the (N, N, N) grid and its labels by ``quarter_turns`` × 90° about +z."""
+    if quarter_turns % 4 == 0:
+        return grid, labels
+    rotated = torch.rot90(grid, quarter_turns % 4, dims=(0, 1))
+    return rotated, rotate_labels_z(labels, grid.shape[0], quarter_turns)
+
+
+def rotate_labels_z(labels: LabelSet, n: int, quarter_turns: int) -> LabelSet:
+    """Labels of an ``n``-wide grid turned by ``quarter_turns`` × 90° about +z; those the turn
+    takes off the grid are dropped."""
     k = quarter_turns % 4
     if k == 0:
-        return grid, labels
-    n = grid.shape[0]
-    rotated = torch.rot90(grid, k, dims=(0, 1))
+        return labels
     i, j, z = labels.voxel.unbind(-1)
     for _ in range(k):
         i, j = n - j, i  # the label convention: position = index × voxel (see the module docstring)
@@ -38,7 +46,7 @@ def rotate_z(grid: torch.Tensor, labels: LabelSet, quarter_turns: int) -> tuple[
     quaternion = multiply(turn.expand_as(labels.quaternion), labels.quaternion)
     voxel = torch.stack([i, j, z], dim=-1)
     moved = LabelSet(voxel, quaternion, labels.width, labels.label)
-    return rotated, moved.select(torch.all((voxel[:, :2] >= 0) & (voxel[:, :2] < n), dim=1))
+    return moved.select(torch.all((voxel[:, :2] >= 0) & (voxel[:, :2] < n), dim=1))
 
 
 def shift_z(grid: torch.Tensor, labels: LabelSet, voxels: int) -> tuple[torch.Tensor, LabelSet]:
@@ -51,18 +59,55 @@ def shift_z(grid: torch.Tensor, labels: LabelSet, voxels: int) -> tuple[torch.Te
         shifted[:, :, voxels:] = grid[:, :, : n - voxels]
     else:
         shifted[:, :, : n + voxels] = grid[:, :, -voxels:]
+    return shifted, shift_labels_z(labels, n, voxels)
+
+
+def shift_labels_z(labels: LabelSet, n: int, voxels: int) -> LabelSet:
+    """Labels moved ``voxels`` along +z; those leaving the ``n``-high grid are dropped."""
+    if voxels == 0:
+        return labels
     voxel = labels.voxel.clone()
     voxel[:, 2] += voxels
     moved = LabelSet(voxel, labels.quaternion, labels.width, labels.label)
-    return shifted, moved.select((voxel[:, 2] >= 0) & (voxel[:, 2] < n))
+    return moved.select((voxel[:, 2] >= 0) & (voxel[:, 2] < n))
+
+
+@dataclass(frozen=True)
+class Placement:
+    """One draw's augmentation: quarter turns about +z, then a z shift in voxels. Kept apart
+    from the grid so that other voxel-wise targets of the same scene move with it."""
+
+    quarter_turns: int
+    shift: int
+
+    def apply(self, grid: torch.Tensor, labels: LabelSet) -> tuple[torch.Tensor, LabelSet]:
+        """The grid and its labels moved by this placement."""
+        grid, labels = rotate_z(grid, labels, self.quarter_turns)
+        return shift_z(grid, labels, self.shift)
+
+    def apply_labels(self, labels: LabelSet, n: int) -> LabelSet:
+        """Labels alone (of an ``n``-wide grid) moved by this placement."""
+        return shift_labels_z(rotate_labels_z(labels, n, self.quarter_turns), n, self.shift)
+
+
+def draw_shift(rng: np.random.Generator, max_shift: int = MAX_Z_SHIFT) -> Placement:
+    """A uniformly random quarter-turn about z, then a shift in U{-max_shift..max_shift}."""
+    return Placement(int(rng.integers(4)), int(rng.integers(-max_shift, max_shift + 1)))
+
+
+def draw_height(labels: LabelSet, n: int, rng: np.random.Generator) -> Placement:
+    """A random quarter-turn about z, then a height uniform over every shift that keeps all the
+    (turned) labels inside an ``n``-high grid: the placement of :func:`random_placement`."""
+    quarter_turns = int(rng.integers(4))
+    low, high = height_range(rotate_labels_z(labels, n, quarter_turns), n)
+    return Placement(quarter_turns, int(rng.integers(low, high + 1)))
 
 
 def random_augment(
     grid: torch.Tensor, labels: LabelSet, rng: np.random.Generator, max_shift: int = MAX_Z_SHIFT
 ) -> tuple[torch.Tensor, LabelSet]:
     """A uniformly random quarter-turn about z, then a shift in U{-max_shift..max_shift}."""
-    grid, labels = rotate_z(grid, labels, int(rng.integers(4)))
-    return shift_z(grid, labels, int(rng.integers(-max_shift, max_shift + 1)))
+    return draw_shift(rng, max_shift).apply(grid, labels)
 
 
 def height_range(labels: LabelSet, n: int) -> tuple[int, int]:
@@ -80,9 +125,7 @@ def random_placement(
     placed at a random height, uniform over every shift that keeps all its labels in the
     grid. The table then appears anywhere from the grid's floor to high up, so the network
     cannot learn "grasps live just above z = 0.05 m" and score empty space by height alone."""
-    grid, labels = rotate_z(grid, labels, int(rng.integers(4)))
-    low, high = height_range(labels, grid.shape[2])
-    return shift_z(grid, labels, int(rng.integers(low, high + 1)))
+    return draw_height(labels, grid.shape[2], rng).apply(grid, labels)
 
 
 def balanced_subset(labels: LabelSet, rng: np.random.Generator) -> LabelSet:

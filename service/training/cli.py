@@ -175,6 +175,29 @@ def build_parser() -> argparse.ArgumentParser:
         "service/models/vgn.safetensors); recorded in the card",
     )
     run.add_argument(
+        "--teacher",
+        metavar="WEIGHTS",
+        type=Path,
+        default=None,
+        help="distil these weights' turn-averaged output (quality, orientation, width at every voxel "
+        "where detection may place a grasp) into the trained network as soft labels beside the "
+        "trial labels; usually the same weights as --init",
+    )
+    run.add_argument(
+        "--distill-weight",
+        metavar="W",
+        type=float,
+        default=DEFAULTS["distill_weight"],
+        help="weight of the soft-label loss against the trial-label loss (default %(default)s)",
+    )
+    run.add_argument(
+        "--soft-per-draw",
+        metavar="K",
+        type=int,
+        default=DEFAULTS["soft_per_draw"],
+        help="soft labels drawn from a scene each time it is drawn (default %(default)s)",
+    )
+    run.add_argument(
         "--patience",
         metavar="P",
         type=int,
@@ -269,6 +292,9 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         threshold=args.threshold,
         target_precision=args.target_precision,
         init=args.init,
+        teacher=args.teacher,
+        distill_weight=args.distill_weight,
+        soft_per_draw=args.soft_per_draw,
         resume=args.resume,
         fresh=args.fresh,
         progress=args.progress,

@@ -18,7 +18,8 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from service.training.augment import balanced_subset, random_augment, random_placement
+from service.training.augment import Placement, balanced_subset, draw_height, draw_shift
+from service.training.distill import SoftTargets
 from service.training.grids import GridSource, cache_dir, cache_key, ensure_cached
 from service.training.labels import LabelSet
 from service.training.shards import ShardFolder, dequantize
@@ -229,11 +230,13 @@ def prepare_grids(scenes: list[Scene], workers: int = 0, progress: bool = True) 
 
 @dataclass
 class Sample:
-    """One scene drawn for a batch: its (possibly augmented) grid, labels and voxel size in metres."""
+    """One scene drawn for a batch: its (possibly augmented) grid, labels and voxel size in
+    metres, and the teacher's soft labels placed the same way when distilling."""
 
     grid: torch.Tensor
     labels: LabelSet
     voxel_size: float
+    soft: LabelSet | None = None
 
 
 class SceneDataset(Dataset[Sample]):
@@ -242,7 +245,8 @@ class SceneDataset(Dataset[Sample]):
     Every draw is fixed by (seed, epoch, index), so runs and resumes repeat exactly. With
     ``balance`` a draw keeps all positives and as many random negatives; ``augment`` is
     ``"height"`` (a quarter-turn and a random height over the label-preserving range, VGN's),
-    ``"shift"`` (a quarter-turn and a ±4 voxel shift) or ``None``.
+    ``"shift"`` (a quarter-turn and a ±4 voxel shift) or ``None``. ``soft`` (one per scene)
+    adds ``soft_per_draw`` of a teacher's soft labels to every draw, moved with the grid.
     """
 
     def __init__(
@@ -252,31 +256,47 @@ class SceneDataset(Dataset[Sample]):
         seed: int,
         copies: int = 1,
         balance: bool = False,
+        soft: list[SoftTargets] | None = None,
+        soft_per_draw: int = 512,
     ) -> None:
         if augment not in (None, "height", "shift"):
             raise ValueError(f"augment must be 'height', 'shift' or None, got {augment!r}")
+        if soft is not None and len(soft) != len(scenes):
+            raise ValueError(f"{len(soft)} soft targets for {len(scenes)} scenes")
         self.scenes = scenes
         self.augment = augment
         self.seed = seed
         self.copies = copies
         self.balance = balance
+        self.soft = soft
+        self.soft_per_draw = soft_per_draw
         self.epoch = 0
 
     def __len__(self) -> int:
         return len(self.scenes) * self.copies
 
     def __getitem__(self, index: int) -> Sample:
-        scene = self.scenes[index % len(self.scenes)]
+        scene_index = index % len(self.scenes)
+        scene = self.scenes[scene_index]
         grid, labels = torch.from_numpy(scene.source.load()), scene.labels
-        if self.augment or self.balance:
-            rng = np.random.default_rng([self.seed, self.epoch, index])
-            if self.balance:
-                labels = balanced_subset(labels, rng)
-            if self.augment == "height":
-                grid, labels = random_placement(grid, labels, rng)
-            elif self.augment == "shift":
-                grid, labels = random_augment(grid, labels, rng)
-        return Sample(grid, labels, scene.voxel_size)
+        if not (self.augment or self.balance or self.soft is not None):
+            return Sample(grid, labels, scene.voxel_size)
+        rng = np.random.default_rng([self.seed, self.epoch, index])
+        if self.balance:
+            labels = balanced_subset(labels, rng)
+        placement: Placement | None = None
+        if self.augment == "height":
+            placement = draw_height(labels, grid.shape[2], rng)
+        elif self.augment == "shift":
+            placement = draw_shift(rng)
+        if placement is not None:
+            grid, labels = placement.apply(grid, labels)
+        soft = None
+        if self.soft is not None:
+            soft = self.soft[scene_index].draw(self.soft_per_draw, rng)
+            if placement is not None:
+                soft = placement.apply_labels(soft, grid.shape[0])
+        return Sample(grid, labels, scene.voxel_size, soft)
 
 
 @dataclass
@@ -284,7 +304,9 @@ class Batch:
     """Scenes stacked for one forward pass and their labels flattened.
 
     grids (B, 1, N, N, N); per label: scene (L,) index into the batch, voxel (L,) flat index
-    into N³, quaternion (L, 4), width (L,) voxels, label (L,), voxel_size (L,) metres.
+    into N³, quaternion (L, 4), width (L,) voxels, label (L,), voxel_size (L,) metres. The
+    ``soft_*`` fields hold a teacher's soft labels the same way (K of them; empty when the
+    run does not distil): scene, flat voxel, quality, quaternion, width.
     """
 
     grids: torch.Tensor
@@ -294,6 +316,11 @@ class Batch:
     width: torch.Tensor
     label: torch.Tensor
     voxel_size: torch.Tensor
+    soft_scene: torch.Tensor
+    soft_voxel: torch.Tensor
+    soft_quality: torch.Tensor
+    soft_quaternion: torch.Tensor
+    soft_width: torch.Tensor
 
     def __len__(self) -> int:
         """Number of labels."""
@@ -310,13 +337,20 @@ class Batch:
         )
 
 
+def _flatten(label_sets: list[LabelSet], n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(scene index, flat voxel index into N³) of every label of the batch's label sets."""
+    scene = torch.cat([torch.full((len(s),), b, dtype=torch.long) for b, s in enumerate(label_sets)])
+    voxel = torch.cat([s.voxel for s in label_sets])
+    return scene, (voxel[:, 0] * n + voxel[:, 1]) * n + voxel[:, 2]
+
+
 def collate(samples: list[Sample]) -> Batch:
     """Stack grids and concatenate labels with the index tensors the loss gathers with."""
     n = samples[0].grid.shape[0]
     grids = torch.stack([s.grid for s in samples])[:, None]
-    scene = torch.cat([torch.full((len(s.labels),), b, dtype=torch.long) for b, s in enumerate(samples)])
-    voxel = torch.cat([s.labels.voxel for s in samples])
-    flat = (voxel[:, 0] * n + voxel[:, 1]) * n + voxel[:, 2]
+    scene, flat = _flatten([s.labels for s in samples], n)
+    soft = [s.soft if s.soft is not None else _NO_LABELS for s in samples]
+    soft_scene, soft_flat = _flatten(soft, n)
     return Batch(
         grids=grids.contiguous(),
         scene=scene,
@@ -327,7 +361,21 @@ def collate(samples: list[Sample]) -> Batch:
         voxel_size=torch.cat(
             [torch.full((len(s.labels),), s.voxel_size, dtype=torch.float32) for s in samples]
         ),
+        soft_scene=soft_scene,
+        soft_voxel=soft_flat,
+        soft_quality=torch.cat([s.label for s in soft]),
+        soft_quaternion=torch.cat([s.quaternion for s in soft]),
+        soft_width=torch.cat([s.width for s in soft]),
     )
+
+
+#: The soft labels of a draw without a teacher.
+_NO_LABELS = LabelSet(
+    voxel=torch.zeros((0, 3), dtype=torch.long),
+    quaternion=torch.zeros((0, 4)),
+    width=torch.zeros(0),
+    label=torch.zeros(0),
+)
 
 
 def make_loader(

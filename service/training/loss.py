@@ -2,7 +2,9 @@
 
 Per label: BCE(q̂, y) + y · (min(1 - |q̂·q|, 1 - |q̂·q_π|) + 0.01 · (ŵ - w)²), with q_π the
 same grasp turned by π about its approach axis and widths in voxels; the batch loss is the
-mean over labels. Unlabelled voxels never enter it, so they get no gradient.
+mean over labels. Unlabelled voxels never enter it, so they get no gradient, unless the run
+distils a teacher: then its soft labels at the grasp-region voxels add the same terms
+(``distillation_loss``).
 """
 
 from __future__ import annotations
@@ -31,11 +33,18 @@ class Predictions:
 def gather(output: tuple[torch.Tensor, torch.Tensor, torch.Tensor], batch: Batch) -> Predictions:
     """Pick the network's (quality (B,1,N,N,N), rotation (B,4,...), width (B,1,...)) at the
     batch's labelled voxels."""
+    return gather_at(output, batch.scene, batch.voxel)
+
+
+def gather_at(
+    output: tuple[torch.Tensor, torch.Tensor, torch.Tensor], scene: torch.Tensor, voxel: torch.Tensor
+) -> Predictions:
+    """The network's output at (scene index, flat voxel index) pairs."""
     quality, rotation, width = (t.flatten(2) for t in output)
     return Predictions(
-        quality=quality[batch.scene, 0, batch.voxel],
-        quaternion=rotation[batch.scene, :, batch.voxel],
-        width=width[batch.scene, 0, batch.voxel],
+        quality=quality[scene, 0, voxel],
+        quaternion=rotation[scene, :, voxel],
+        width=width[scene, 0, voxel],
     )
 
 
@@ -57,3 +66,15 @@ def per_label_loss(predictions: Predictions, batch: Batch) -> torch.Tensor:
 def vgn_loss(predictions: Predictions, batch: Batch) -> torch.Tensor:
     """Mean loss over the batch's labelled voxels."""
     return per_label_loss(predictions, batch).mean()
+
+
+def distillation_loss(output: tuple[torch.Tensor, torch.Tensor, torch.Tensor], batch: Batch) -> torch.Tensor:
+    """(K,) VGN's loss at the batch's soft labels: BCE with the teacher's quality, and the
+    rotation and width terms weighted by that quality (the trial-label loss weights them by
+    the 0/1 label)."""
+    predictions = gather_at(output, batch.soft_scene, batch.soft_voxel)
+    target = batch.soft_quality
+    quality = F.binary_cross_entropy(predictions.quality, target, reduction="none")
+    rotation = rotation_loss(predictions.quaternion, batch.soft_quaternion)
+    width = WIDTH_WEIGHT * (predictions.width - batch.soft_width).square()
+    return quality + target * (rotation + width)

@@ -46,8 +46,9 @@ from service.training.dataset import (
     split_scenes,
     subsample_scenes,
 )
+from service.training.distill import SoftTargets, teach
 from service.training.grids import MAX_DEPTH, RESOLUTION
-from service.training.loss import gather, per_label_loss
+from service.training.loss import distillation_loss, gather, per_label_loss
 from service.training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
 from service.training.shards import ShardFolder, manifest_summary
 from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
@@ -91,6 +92,12 @@ class TrainConfig:
     target_precision: float = 0.8
     #: weights to start from instead of a random initialisation (fine-tuning, e.g. the shipped model)
     init: Path | None = None
+    #: weights whose turn-averaged output is distilled as soft labels (``service.training.distill``)
+    teacher: Path | None = None
+    #: weight of the soft-label loss beside the trial labels' (both means over their labels)
+    distill_weight: float = 1.0
+    #: soft labels drawn per scene draw (from the teacher's grasp-region voxels)
+    soft_per_draw: int = 512
     resume: bool = False
     fresh: bool = False
     progress: bool = True
@@ -120,6 +127,10 @@ class TrainConfig:
             raise TrainingError("give --resume or --fresh, not both")
         if self.init is not None and not Path(self.init).is_file():
             raise TrainingError(f"--init: no weights file at {self.init}")
+        if self.teacher is not None and not Path(self.teacher).is_file():
+            raise TrainingError(f"--teacher: no weights file at {self.teacher}")
+        if self.distill_weight < 0 or self.soft_per_draw < 1:
+            raise TrainingError("--distill-weight must be >= 0 and --soft-per-draw >= 1")
 
 
 @dataclass
@@ -173,8 +184,15 @@ def train(
     state = _start(config, network, optimizer, _identity(config, val_scenes), log)
     resumed_from = state.epoch
 
+    soft = _teacher_targets(config, train_scenes, device, log)
     train_data = SceneDataset(
-        train_scenes, augment=config.augment, seed=config.seed, copies=config.copies, balance=config.balance
+        train_scenes,
+        augment=config.augment,
+        seed=config.seed,
+        copies=config.copies,
+        balance=config.balance,
+        soft=soft,
+        soft_per_draw=config.soft_per_draw,
     )
     val_data = SceneDataset(val_scenes, augment=None, seed=config.seed)
     if state.epoch < config.epochs and not _patience_ran_out(state.history, config.patience):
@@ -186,7 +204,13 @@ def train(
         started = time.perf_counter()
         loader = make_loader(train_data, config.batch_scenes, True, epoch, config.workers)
         train_metrics = _run_epoch(
-            network, loader, device, optimizer, f"epoch {epoch + 1}/{config.epochs}", config.progress
+            network,
+            loader,
+            device,
+            optimizer,
+            f"epoch {epoch + 1}/{config.epochs}",
+            config.progress,
+            config.distill_weight if soft is not None else 0.0,
         )
         val_metrics = None
         if len(val_data):
@@ -309,6 +333,25 @@ def _start(
     return TrainingState(epoch=0, model={}, optimizer={}, history=[], identity=identity)
 
 
+def _teacher_targets(
+    config: TrainConfig, scenes: list[Scene], device: torch.device, log: Callable[[str], None]
+) -> list[SoftTargets] | None:
+    """The teacher's soft labels for every training scene, or None without a teacher. They are
+    worked out again on resume (the same weights give the same targets), not stored."""
+    if config.teacher is None:
+        return None
+    started = time.perf_counter()
+    try:
+        soft = teach(Path(config.teacher), [scene.source for scene in scenes], str(device), config.progress)
+    except CheckpointError as error:
+        raise TrainingError(f"--teacher: {error}") from None
+    log(
+        f"teacher {weights_id(Path(config.teacher))}: {sum(map(len, soft))} soft labels in "
+        f"{len(soft)} scenes ({time.perf_counter() - started:.0f} s)"
+    )
+    return soft
+
+
 def _initial_network(config: TrainConfig) -> VGN:
     """Random weights, or ``config.init``'s: fine-tuning reuses what a model learned about
     geometry when new labels (another hand, a new scene type) are too few to learn it again."""
@@ -345,6 +388,8 @@ def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
     }
     if config.max_train_scenes is not None:  # absent otherwise, so earlier checkpoints still resume
         identity["max_train_scenes"] = config.max_train_scenes
+    if config.teacher is not None:
+        identity["teacher"] = weights_id(Path(config.teacher))
     return identity
 
 
@@ -355,10 +400,14 @@ def _run_epoch(
     optimizer: torch.optim.Optimizer | None,
     description: str,
     progress: bool,
+    distill_weight: float = 0.0,
 ) -> dict[str, float | int | None]:
-    """One pass over ``loader``: trains when given an optimizer, else only evaluates."""
+    """One pass over ``loader``: trains when given an optimizer, else only evaluates. Metrics
+    are those of the trial labels; the soft-label loss, when the batches carry soft labels and
+    ``distill_weight`` > 0, adds to the optimised loss and is reported as ``distill_loss``."""
     network.train(optimizer is not None)
     metrics = MetricAccumulator()
+    distill_total, distill_count = 0.0, 0
     bar = tqdm(loader, desc=description, unit="batch", disable=not progress, leave=False)
     with torch.set_grad_enabled(optimizer is not None):
         for batch in bar:
@@ -366,9 +415,15 @@ def _run_epoch(
                 continue
             batch = batch.to(device)
             grids = batch.grids.to(memory_format=_memory_format(device))
-            predictions = gather(network(grids), batch)
+            output = network(grids)
+            predictions = gather(output, batch)
             losses = per_label_loss(predictions, batch)
             loss = losses.mean()
+            if distill_weight > 0 and len(batch.soft_scene):
+                soft_losses = distillation_loss(output, batch)
+                loss = loss + distill_weight * soft_losses.mean()
+                distill_total += float(soft_losses.detach().sum())
+                distill_count += len(soft_losses)
             if not torch.isfinite(loss):
                 raise TrainingError(f"the loss became {loss.item()} ({description}); lower --lr?")
             if optimizer is not None:
@@ -377,7 +432,11 @@ def _run_epoch(
                 optimizer.step()
             metrics.update(predictions, batch, losses.detach())
             bar.set_postfix(loss=f"{loss.item():.4f}")
-    return metrics.result()
+    result = metrics.result()
+    if distill_count:
+        result["distill_loss"] = distill_total / distill_count
+        result["soft_labels"] = distill_count
+    return result
 
 
 def _memory_format(device: torch.device) -> torch.memory_format:
@@ -421,6 +480,15 @@ def _training_settings(
         "init": None
         if config.init is None
         else {"path": str(config.init), "weights_id": weights_id(Path(config.init))},
+        "distillation": None
+        if config.teacher is None
+        else {
+            "teacher": {"path": str(config.teacher), "weights_id": weights_id(Path(config.teacher))},
+            "targets": "the teacher's turn-averaged quality, orientation and unturned width at every "
+            "grasp-region voxel of each training scene, moved with the scene's augmentation",
+            "weight": config.distill_weight,
+            "soft_labels_per_draw": config.soft_per_draw,
+        },
         "resolution": config.resolution,
         "max_depth": config.max_depth,
         "device": str(device),
