@@ -27,10 +27,10 @@ MAX_Z_SHIFT = 4
 
 def rotate_z(grid: torch.Tensor, labels: LabelSet, quarter_turns: int) -> tuple[torch.Tensor, LabelSet]:
     """Turn the (N, N, N) grid and its labels by ``quarter_turns`` × 90° about +z."""
-    if quarter_turns % 4 == 0:
+    k = quarter_turns % 4
+    if k == 0:
         return grid, labels
-    rotated = torch.rot90(grid, quarter_turns % 4, dims=(0, 1))
-    return rotated, rotate_labels_z(labels, grid.shape[0], quarter_turns)
+    return torch.rot90(grid, k, dims=(0, 1)), rotate_labels_z(labels, grid.shape[0], k)
 
 
 def rotate_labels_z(labels: LabelSet, n: int, quarter_turns: int) -> LabelSet:

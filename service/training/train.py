@@ -184,7 +184,9 @@ def train(
     state = _start(config, network, optimizer, _identity(config, val_scenes), log)
     resumed_from = state.epoch
 
-    soft = _teacher_targets(config, train_scenes, device, log)
+    will_train = state.epoch < config.epochs and not _patience_ran_out(state.history, config.patience)
+    # The teacher costs minutes; a resume that only rewrites the card needs none of it.
+    soft = _teacher_targets(config, train_scenes, device, log) if will_train else None
     train_data = SceneDataset(
         train_scenes,
         augment=config.augment,
@@ -195,7 +197,7 @@ def train(
         soft_per_draw=config.soft_per_draw,
     )
     val_data = SceneDataset(val_scenes, augment=None, seed=config.seed)
-    if state.epoch < config.epochs and not _patience_ran_out(state.history, config.patience):
+    if will_train:
         log(report.header(validation=bool(val_scenes)))
     for epoch in range(state.epoch, config.epochs):
         if _patience_ran_out(state.history, config.patience):
