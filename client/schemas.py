@@ -358,7 +358,8 @@ class ModelInfo(_Model):
     card: dict[str, Any] | None = Field(
         default=None,
         description="from the model card beside the weights (<name>.card.json), when there is one: "
-        "training date, scenes and grasps, epochs, validation figures, the command that reproduces them",
+        "training date, scenes and grasps, epochs, the shipped epoch with its optimizer steps and validation "
+        "figures, the executed-grasp result of a clear-scene run, the command that reproduces them",
     )
     runtime: dict[str, Any] | None = Field(
         default=None,

@@ -50,7 +50,10 @@ def card_summary(weights: Path, content_id: str | None = None) -> dict[str, Any]
     if not isinstance(card, dict):
         return None
     datasets = card.get("datasets") or []
-    final = (card.get("metrics") or {}).get("final") or {}
+    metrics = card.get("metrics") or {}
+    # The weights are the best epoch's, not the last one's: report the figures that match them.
+    shipped = metrics.get("best") or metrics.get("final") or {}
+    executed = card.get("executed_grasps") or {}
     return {
         "date": card.get("date"),
         "matches_weights": (card.get("model") or {}).get("weights_id") == (content_id or weights_id(weights)),
@@ -58,10 +61,21 @@ def card_summary(weights: Path, content_id: str | None = None) -> dict[str, Any]
         "grasps": sum(int(d.get("grasps", 0)) for d in datasets if isinstance(d, dict)),
         "epochs": card.get("epochs"),
         "threshold": card.get("threshold"),
-        "validation": final.get("val"),
+        "epoch": shipped.get("epoch"),
+        "steps": shipped.get("steps"),
+        "validation": shipped.get("val"),
+        "executed_grasps": _executed_summary(executed) if isinstance(executed, dict) else None,
         "command": card.get("command"),
         "code_version": card.get("code_version"),
     }
+
+
+def _executed_summary(executed: dict[str, Any]) -> dict[str, Any] | None:
+    """The card's clear-scene result in brief: the number that says how well the weights grasp."""
+    if "success_rate" not in executed:
+        return None
+    keys = ("rounds", "attempts", "success_rate", "success_rate_ci95", "percent_cleared", "outcomes")
+    return {"settings": executed.get("settings"), **{k: executed.get(k) for k in keys}}
 
 
 def read_state_dict(path: Path) -> dict[str, torch.Tensor]:

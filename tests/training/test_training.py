@@ -524,3 +524,23 @@ def test_card_summary_needs_a_card_that_belongs_to_the_weights(tmp_path: Path):
     summary = card_summary(weights)
     assert summary is not None and summary["scenes"] == 3
     assert not summary["matches_weights"], "a card copied beside other weights is flagged"
+
+
+def test_card_summary_reports_the_epoch_that_shipped_and_the_executed_grasps(tmp_path: Path):
+    weights = tmp_path / "vgn.safetensors"
+    torch.manual_seed(0)
+    save_vgn(VGN(), weights)
+    best = {"epoch": 2, "steps": 20, "val": {"loss": 0.3}}
+    final = {"epoch": 3, "steps": 30, "val": {"loss": 0.4}}
+    executed = {"settings": {"scene": "pile"}, "rounds": 5, "success_rate": 0.6, "outcomes": {"success": 3}}
+    card = {"model": {"weights_id": weights_id(weights)}, "metrics": {"final": final, "best": best}}
+    card_path(weights).write_text(json.dumps({**card, "executed_grasps": executed}))
+    summary = card_summary(weights)
+    assert summary is not None and summary["matches_weights"]
+    assert (summary["epoch"], summary["steps"], summary["validation"]) == (2, 20, {"loss": 0.3})
+    assert summary["executed_grasps"]["success_rate"] == 0.6
+    assert summary["executed_grasps"]["settings"] == {"scene": "pile"}
+    card_path(weights).write_text(json.dumps({**card, "metrics": {"final": final}}))
+    summary = card_summary(weights)
+    assert summary is not None and summary["epoch"] == 3, "older cards without a best epoch show the last"
+    assert summary["executed_grasps"] is None
