@@ -20,7 +20,7 @@ from client.embedded import EmbeddedService
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
 from sim_worker.gripper import GRIPPER_VERSION
 from vgn_data.dataset import RawDataset
-from vgn_data.files import check_settings
+from vgn_data.files import check_settings, remove_stale_temporaries
 
 if TYPE_CHECKING:
     from multiprocessing.queues import Queue
@@ -75,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
+    for leftover in remove_stale_temporaries(out):
+        print(f"removed {leftover}, left by a killed writer", file=sys.stderr)
     done = dataset.done_scene_ids()
     todo = [i for i in range(args.scenes) if scene_id(args.seed, i) not in done]
     if getattr(args, "ray", None) is not None:  # the scenes spread over a Ray cluster instead

@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from vgn_data.files import check_settings, write_atomically
+from vgn_data.files import check_settings, remove_stale_temporaries, write_atomically
 
 ROUND_COLUMNS = ["round_id", "scene_id", "object_count", "cleared", "attempts", "successes", "seconds"]
 GRASP_COLUMNS = [
@@ -85,6 +85,7 @@ class ResultsFolder:
         self.path = Path(path)
         self.path.mkdir(parents=True, exist_ok=True)
         check_settings(self.path / "config.json", config, may_change=("rounds",))
+        remove_stale_temporaries(self.path)
         self.rounds = _read_csv(self.path / "rounds.csv")
         finished = {row["round_id"] for row in self.rounds}
         # Rows of a round that never finished are dropped: that round runs again.

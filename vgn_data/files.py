@@ -15,8 +15,10 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import signal
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
@@ -50,13 +52,54 @@ def crash_now() -> None:
     os.kill(os.getpid(), signal.SIGKILL)
 
 
+#: Temporary files carry their writer's process id, so that a resumed run can tell the leftovers
+#: of a killed writer from the files of one still writing.
+TEMPORARY_PID_MARK = "pid"
+_TEMPORARY_NAME = re.compile(rf"^\..+\.{TEMPORARY_PID_MARK}(\d+)\.[^.]+\.tmp$")
+#: Temporaries without a process id (older writers) count as abandoned after this long.
+UNMARKED_TEMPORARY_AGE_S = 3600.0
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: Path, pattern: str = ".*.tmp", recursive: bool = True) -> list[Path]:
+    """Delete the temporary files (``pattern``) that killed writers left in ``folder`` and,
+    when ``recursive``, below it, and return them: a write is never completed from its
+    temporary, so they are garbage. Those of live processes on this machine stay: a run may
+    resume beside another one still writing."""
+    removed = []
+    candidates = Path(folder).rglob(pattern) if recursive else Path(folder).glob(pattern)
+    for candidate in candidates:
+        match = _TEMPORARY_NAME.match(candidate.name)
+        try:
+            if match:
+                stale = not _process_alive(int(match.group(1)))
+            else:
+                stale = time.time() - candidate.stat().st_mtime > UNMARKED_TEMPORARY_AGE_S
+            if stale and candidate.is_file():
+                candidate.unlink()
+                removed.append(candidate)
+        except FileNotFoundError:  # renamed or removed meanwhile by its writer
+            continue
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_writer(path: Path, mode: str = "wb") -> Iterator[IO]:
     """A file to write ``path``'s new content into; it replaces ``path`` when the block ends
     without error and is removed otherwise. The result gets an ordinary file's mode."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    prefix = f".{path.name}.{TEMPORARY_PID_MARK}{os.getpid()}."
+    descriptor, temporary = tempfile.mkstemp(prefix=prefix, suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(descriptor, mode) as stream:
             yield stream

@@ -24,6 +24,7 @@ from service.training.grids import GridSource, cache_dir, cache_key, ensure_cach
 from service.training.labels import LabelSet
 from service.training.shards import ShardFolder, dequantize
 from vgn_data.dataset import RawDataset
+from vgn_data.files import remove_stale_temporaries
 
 
 @dataclass(frozen=True, eq=False)
@@ -213,6 +214,8 @@ def prepare_grids(scenes: list[Scene], workers: int = 0, progress: bool = True) 
     do not like being forked mid-run).
     """
     sources = [scene.source for scene in scenes if isinstance(scene.source, GridSource)]
+    for folder in {source.cache_path.parent for source in sources}:
+        remove_stale_temporaries(folder, recursive=False)
     bar = tqdm(total=len(sources), desc="grids", unit="scene", disable=not progress, leave=False)
     built = 0
     if workers > 0 and len(sources) > 1:

@@ -35,7 +35,7 @@ import numpy as np
 
 from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
 from vgn_data.dataset import RawDataset
-from vgn_data.files import write_atomically
+from vgn_data.files import remove_stale_temporaries, write_atomically
 
 MANIFEST = "manifest.json"
 SHARD_FORMAT = 1
@@ -150,6 +150,7 @@ class ShardFolder:
         if not source.replace("-", "").replace("_", "").isalnum():
             raise ShardError(f"source name {source!r} must be alphanumeric (with - or _)")
         manifest = self._manifest_for(raw, source, resolution, max_depth)
+        remove_stale_temporaries(self.root)
         packed = self.packed_scene_ids(source)
         ids, rows = raw.grasps()
         by_scene: dict[str, list[np.ndarray]] = {}

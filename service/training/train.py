@@ -53,6 +53,7 @@ from service.training.metrics import THRESHOLD, MetricAccumulator, choose_thresh
 from service.training.shards import ShardFolder, manifest_summary
 from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
+from vgn_data.files import remove_stale_temporaries
 
 
 class TrainingError(Exception):
@@ -156,6 +157,8 @@ def train(
     """Run (or continue) training as ``config`` says and write weights, card and checkpoint."""
     config.check()
     _check_checkpoint(config)
+    # Only this run's own files (weights, card, checkpoint, curves): the folder may hold others.
+    remove_stale_temporaries(config.out.parent, f".{config.out.stem}.*.tmp", recursive=False)
     device = resolve_device(config.device)
     if device.type == "cuda" and not torch.cuda.is_available():
         raise TrainingError("--device cuda was asked for but torch sees no CUDA GPU")

@@ -166,6 +166,7 @@ def test_generate_data_killed_before_a_scene_file_lands(server, reference_datase
     assert "1 of 2 scenes already" in again.stderr
     assert (out / "grasps.csv").read_text().startswith(kept)
     assert_same_dataset(out, reference_datasets[2])
+    assert not leftovers(out), "the rerun removes the killed writer's temporary file"
 
 
 @pytest.mark.slow
@@ -233,6 +234,7 @@ def test_clear_scene_killed_between_its_two_result_files(server, reference_resul
     assert again.returncode == 0, again.stderr
     assert "resuming" not in again.stderr, "no round had finished"
     assert_same_results(results, reference_results)
+    assert not leftovers(results), "the rerun removes the killed writer's temporary file"
 
 
 @pytest.mark.slow
@@ -325,6 +327,7 @@ def test_train_killed_during_a_checkpoint_write(boxes, reference_training, tmp_p
     again = train(boxes, out, 2, "--resume")
     assert again.returncode == 0, again.stderr
     assert_same_training(out, reference_training)
+    assert not leftovers(tmp_path), "the rerun removes the killed writer's temporary file"
 
 
 @pytest.mark.slow
