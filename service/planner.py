@@ -18,7 +18,7 @@ from service.errors import ModelNotReady
 from service.runtime import usable_cores
 from service.vgn.batching import MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
-from service.vgn.detection import DetectionConfig, detect_grasps
+from service.vgn.detection import DetectionConfig, detect_grasps, grasp_region
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
 from service.vgn.turns import average_turned_quality, average_turned_rotation, turned_grids
@@ -206,7 +206,8 @@ class GraspPlanner:
 
         With ``turn_average`` quality and orientation are the means over the grid's four
         quarter turns about gravity (one batch of four grids; see :mod:`service.vgn.turns`);
-        widths stay those of the unturned grid.
+        widths stay those of the unturned grid. Orientations are averaged in the grasp region
+        only, the voxels detection can return (elsewhere they are the unturned grid's).
         """
         if self._network is None:
             raise ModelNotReady(NO_MODEL_MESSAGE)
@@ -215,7 +216,8 @@ class GraspPlanner:
             return self._batcher.run(grid)
         outputs = self._batcher.run_many(list(turned_grids(grid)))  # rows of one stacked array: contiguous
         quality = average_turned_quality(np.stack([output.quality for output in outputs]))
-        rotation = average_turned_rotation(np.stack([output.rotation for output in outputs]))
+        rotations = np.stack([output.rotation for output in outputs])
+        rotation = average_turned_rotation(rotations, where=grasp_region(grid))
         return NetworkOutput(quality, rotation, outputs[0].width)
 
     def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:

@@ -58,7 +58,7 @@ def average_turned_quality(qualities: np.ndarray) -> np.ndarray:
     return (total / count).astype(qualities.dtype)
 
 
-def average_turned_rotation(rotations: np.ndarray) -> np.ndarray:
+def average_turned_rotation(rotations: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
     """(4, N, N, N) mean grasp orientation, in the unturned grid's frame and voxels, of
     (4, 4, N, N, N) network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`.
 
@@ -66,23 +66,49 @@ def average_turned_rotation(rotations: np.ndarray) -> np.ndarray:
     quaternion and its negative are one rotation, and a grasp turned by π about its approach is
     the same grasp, so each is first replaced by whichever of those four forms lies nearest the
     unturned grid's own prediction; the mean of the aligned forms, normalised, is the result.
-    The two quaternion products are written out in numpy (3x faster here than the training's
-    torch helpers in ``service.training.quaternions``, which the tests check them against).
+
+    ``where`` ((N, N, N) bool) limits the averaging to those voxels, e.g. the grasp region,
+    outside which detection never reads an orientation: elsewhere the result is the unturned
+    grid's prediction. On a 40³ grid the whole field costs about 7 ms, the grasp region about
+    a sixth of that.
     """
     reference = rotations[0]
-    total = reference.astype(np.float32, copy=True)
+    if where is None:
+        total = reference.astype(np.float32, copy=True)
+        for k in TURNS[1:]:
+            total += _aligned_back(np.stack([_read_back(row, k)[0] for row in rotations[k]]), reference, k)
+        return total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)
+    n = rotations.shape[-1]
+    i, j, depth = np.nonzero(where)
+    chosen_reference = reference[:, i, j, depth]
+    total = chosen_reference.astype(np.float32, copy=True)
     for k in TURNS[1:]:
-        x, y, z, w = (_read_back(row, k)[0] for row in rotations[k])
-        # Turned back: about_z(-k π/2) ⊗ q, written out (the rotation has only z and w parts).
-        sine, cosine = math.sin(-k * math.pi / 4), math.cos(-k * math.pi / 4)
-        back = np.stack(
-            [cosine * x - sine * y, cosine * y + sine * x, cosine * z + sine * w, cosine * w - sine * z]
-        )
-        turned_about_approach = np.stack([back[1], -back[0], back[3], -back[2]])  # back ⊗ [0, 0, 1, 0]
-        plain_agreement = np.einsum("q...,q...->...", back, reference)
-        turned_agreement = np.einsum("q...,q...->...", turned_about_approach, reference)
-        use_turned = np.abs(turned_agreement) > np.abs(plain_agreement)
-        chosen = np.where(use_turned, turned_about_approach, back)
-        sign = np.sign(np.where(use_turned, turned_agreement, plain_agreement))
-        total += chosen * sign
-    return total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)
+        turned_i, turned_j = (index[i, j] for index in turned_index(n, k))
+        on_grid = (turned_i >= 0) & (turned_i < n) & (turned_j >= 0) & (turned_j < n)
+        turned = np.zeros_like(chosen_reference)
+        turned[:, on_grid] = rotations[k][:, turned_i[on_grid], turned_j[on_grid], depth[on_grid]]
+        total += _aligned_back(turned, chosen_reference, k)
+    averaged = reference.copy()
+    averaged[:, i, j, depth] = total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)
+    return averaged
+
+
+def _aligned_back(turned: np.ndarray, reference: np.ndarray, quarter_turns: int) -> np.ndarray:
+    """Quaternions (4, ...) of the grid turned by ``quarter_turns``, already read at the
+    reference's positions (zeros where off the grid, which then add nothing), turned back about
+    z and put in the form (sign, and π about the approach) nearest ``reference``. The two
+    quaternion products are written out in numpy (3x faster here than the training's torch
+    helpers in ``service.training.quaternions``, which the tests check them against)."""
+    x, y, z, w = turned
+    # Turned back: about_z(-k π/2) ⊗ q, written out (the rotation has only z and w parts).
+    sine, cosine = math.sin(-quarter_turns * math.pi / 4), math.cos(-quarter_turns * math.pi / 4)
+    back = np.stack(
+        [cosine * x - sine * y, cosine * y + sine * x, cosine * z + sine * w, cosine * w - sine * z]
+    )
+    turned_about_approach = np.stack([back[1], -back[0], back[3], -back[2]])  # back ⊗ [0, 0, 1, 0]
+    plain_agreement = np.einsum("q...,q...->...", back, reference)
+    turned_agreement = np.einsum("q...,q...->...", turned_about_approach, reference)
+    use_turned = np.abs(turned_agreement) > np.abs(plain_agreement)
+    chosen = np.where(use_turned, turned_about_approach, back)
+    sign = np.sign(np.where(use_turned, turned_agreement, plain_agreement))
+    return chosen * sign

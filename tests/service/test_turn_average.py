@@ -22,6 +22,7 @@ from service.training.augment import rotate_z
 from service.training.labels import LabelSet
 from service.training.quaternions import about_z, flipped, multiply
 from service.vgn.batching import MicroBatcher
+from service.vgn.detection import grasp_region
 from service.vgn.turns import (
     TURNS,
     average_turned_quality,
@@ -103,7 +104,13 @@ def test_the_planner_averages_the_shipped_models_outputs_over_the_turns():
     qualities = np.stack([output.quality for output in one_by_one])
     rotations = np.stack([output.rotation for output in one_by_one])
     np.testing.assert_allclose(averaged.quality, average_turned_quality(qualities), atol=1e-5)
-    np.testing.assert_allclose(averaged.rotation, average_turned_rotation(rotations), atol=1e-4)
+    region = grasp_region(grid)
+    assert region.any() and not region.all()
+    np.testing.assert_allclose(
+        averaged.rotation[:, region], average_turned_rotation(rotations)[:, region], atol=1e-4
+    )
+    # Detection never reads an orientation outside the grasp region: there it is the unturned one.
+    np.testing.assert_allclose(averaged.rotation[:, ~region], plain.rotation[:, ~region], atol=1e-4)
     # Widths are the unturned grid's (from a batch of four: float32 rounding apart).
     np.testing.assert_allclose(averaged.width, plain.width, atol=1e-4)
     assert not np.allclose(averaged.quality, plain.quality, atol=1e-3), "the turns disagree somewhere"
@@ -186,6 +193,18 @@ def test_orientations_that_turn_with_the_scene_average_back_to_the_unturned_ones
         for axis in range(4):
             turned[k, axis][to_i[on_grid], to_j[on_grid]] = rotated[..., axis].numpy()[on_grid]
     np.testing.assert_allclose(average_turned_rotation(turned), reference, atol=1e-5)
+
+
+def test_averaging_some_voxels_gives_the_full_fields_answer_there():
+    rng = np.random.default_rng(4)
+    turned = np.stack([_random_rotations(rng) for _ in TURNS])
+    where = rng.random((N, N, N)) < 0.2
+    where[0, :, 0] = where[N - 1, N - 1, :] = True  # voxels that some turns take off the grid
+    full = average_turned_rotation(turned)
+    some = average_turned_rotation(turned, where=where)
+    np.testing.assert_allclose(some[:, where], full[:, where], atol=1e-6)
+    np.testing.assert_array_equal(some[:, ~where], turned[0][:, ~where])
+    np.testing.assert_array_equal(average_turned_rotation(turned, where=np.zeros_like(where)), turned[0])
 
 
 def test_the_averaged_orientation_lies_between_disagreeing_turns():
