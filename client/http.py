@@ -193,7 +193,7 @@ class Calls:
 
     @staticmethod
     def view_page(session_id: str, refresh: float = 0.0, **options: Any) -> Call[str]:
-        params = {**GraspQuery(**options).to_params(), "refresh": refresh}
+        params = {**GraspQuery(**options).to_params(), "refresh": refresh, "standalone": "true"}
         return Call("GET", f"/sessions/{session_id}/view", lambda r: r.text, {"params": params})
 
     @staticmethod

@@ -19,7 +19,7 @@ from service.api.errors import install_error_handlers
 from service.api.limits import BodySizeLimit
 from service.api.metrics import RequestMetrics, ServiceMetrics
 from service.api.routes import api, health
-from service.api.viewer import viewer
+from service.api.viewer import viewer, viewer_assets
 from service.core import PlanningService
 from service.settings import Settings
 
@@ -69,6 +69,7 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
     app.include_router(health)
     app.include_router(api)
     app.include_router(viewer)
+    app.include_router(viewer_assets)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_frame_bytes + MULTIPART_OVERHEAD)
     # Starlette spools file parts over 1 MiB to disk; a 640x480 float32 frame is 1.2 MB.
     # Bodies are already capped above, so keep whole frames in memory (halves parsing time).

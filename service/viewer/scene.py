@@ -32,6 +32,10 @@ class ViewQuery(GraspQuery):
     max_points: int = Field(
         default=DEFAULT_MAX_POINTS, ge=100, le=500000, description="surface points drawn at most"
     )
+    standalone: bool = Field(
+        default=False,
+        description="the page only: inline plotly.js (4.6 MB), so that it works saved to a file, offline",
+    )
 
     def grasp_query(self) -> GraspQuery:
         """The planning options alone, as the grasp request would send them."""

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import io
 import json
+import re
 from pathlib import Path
+from urllib.parse import urljoin, urlsplit
 
+import httpx
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
@@ -70,12 +73,36 @@ def test_view_data_matches_the_grasp_query(viewer_http: TestClient) -> None:
     assert all(g["position"][2] <= 0.08 for g in cropped["grasps"])
 
 
-def test_view_page_is_self_contained(viewer_http: TestClient) -> None:
-    response = viewer_http.get("/sessions/box/view", params=OPTIONS)
+def test_standalone_view_page_is_self_contained(viewer_http: TestClient) -> None:
+    response = viewer_http.get("/sessions/box/view", params={**OPTIONS, "standalone": "true"})
     assert response.status_code == 200 and response.headers["content-type"].startswith("text/html")
     page = response.text
     assert "Plotly" in page and "<script src" not in page and "http://" not in page.split("</head>")[1]
-    assert '"session_id":"box"' in page
+    assert "* plotly.js v" in page and '"session_id":"box"' in page
+
+
+def test_view_page_loads_plotly_from_the_services_cacheable_route(viewer_http: TestClient) -> None:
+    response = viewer_http.get("/sessions/box/view", params=OPTIONS, headers={"Accept-Encoding": "gzip"})
+    assert response.status_code == 200 and "* plotly.js v" not in response.text, "the library is not inlined"
+    assert response.headers["content-encoding"] == "gzip"
+    assert int(response.headers["content-length"]) < len(response.content) / 2
+    data = viewer_http.get("/sessions/box/view/data", params=OPTIONS, headers={"Accept-Encoding": "gzip"})
+    assert data.headers["content-encoding"] == "gzip" and data.json()["session_id"] == "box"
+    (source,) = re.findall(r'<script src="([^"]+)"></script>', response.text)
+    script_url = urljoin(str(response.url), source)
+    assert urlsplit(script_url).path.startswith("/viewer/plotly-"), script_url
+    raw = httpx.Headers({"Accept-Encoding": "identity"})
+    plain = viewer_http.get(script_url, headers=raw)
+    assert plain.status_code == 200 and plain.headers["content-type"].startswith("text/javascript")
+    assert "immutable" in plain.headers["cache-control"] and "content-encoding" not in plain.headers
+    assert len(plain.content) > 1_000_000 and b"plotly" in plain.content[:5000].lower()
+    packed = viewer_http.get(script_url, headers={"Accept-Encoding": "gzip"})
+    assert packed.headers["content-encoding"] == "gzip" and packed.content == plain.content
+    assert int(packed.headers["content-length"]) < len(plain.content) / 2
+    again = viewer_http.get(script_url, headers={"If-None-Match": plain.headers["etag"]})
+    assert again.status_code == 304 and not again.content
+    stale = viewer_http.get("/viewer/plotly-0000000000000000.min.js")
+    assert stale.status_code == 404 and "reload the page" in stale.json()["detail"]
 
 
 @pytest.mark.parametrize(
@@ -110,7 +137,10 @@ def test_view_needs_the_api_key(random_checkpoint: Path) -> None:
         client.post("/sessions", json={"session_id": "k"}, headers=key)
         assert client.get("/sessions/k/view").status_code == 401
         assert client.get("/sessions/k/view/data").status_code == 401
-        assert client.get("/sessions/k/view", headers=key).status_code == 200
+        page = client.get("/sessions/k/view", headers=key)
+        assert page.status_code == 200
+        (source,) = re.findall(r'<script src="([^"]+)"></script>', page.text)
+        assert client.get(urljoin(str(page.url), source)).status_code == 200, "a public library, no data"
 
 
 def test_view_without_a_model_still_shows_the_surface() -> None:
@@ -180,6 +210,7 @@ def test_cli_saves_the_viewer(server, vgn, tmp_path: Path, capsys) -> None:
     out = tmp_path / "view.html"
     assert main(["view", session, "--url", server.url, "--out", str(out), "--threshold", "0.5"]) == 0
     page = out.read_text(encoding="utf-8")
+    assert "<script src" not in page, "a saved page opens offline"
     scene = json.loads(page.split('<script id="scene" type="application/json">')[1].split("</script>")[0])
     assert scene["session_id"] == session and scene["frame_count"] == 2 and scene["query"]["refresh"] == 0
     assert len(scene["grasps"]) == len(vgn.grasps(session, threshold=0.5, max_grasps=20).grasps)
