@@ -137,6 +137,7 @@ FRAME_HTTP_PACED = "VGNClient.add_frame (raw f32), 33 ms after the last call"
 #: Idle time before each paced upload: a 30 Hz depth camera.
 CAMERA_PERIOD_S = 1 / 30
 GRASPS_HTTP = "VGNClient.grasps"
+GRASPS_HTTP_TURNS = "VGNClient.grasps, turn averaging"
 FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
@@ -494,12 +495,14 @@ def http_grasp_operation(
     name: str = GRASPS_HTTP,
     group: str = "6 grasps HTTP",
     new_frame: bool = True,
+    turn_average: bool = False,
 ) -> tuple[Operation, int]:
     """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
     ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
     the network; without, the service answers from its last network output."""
     session_id = fused_session(client, frames)
-    grasps = len(client.grasps(session_id, threshold=THRESHOLD).grasps)
+    options = {"threshold": THRESHOLD, "turn_average": turn_average}
+    grasps = len(client.grasps(session_id, **options).grasps)
     n = len(frames)
 
     def post_frame(k: int) -> None:
@@ -510,8 +513,8 @@ def http_grasp_operation(
     operation = Operation(
         name,
         group,
-        lambda k: client.grasps(session_id, threshold=THRESHOLD),
-        "target" if new_frame else "",
+        lambda k: client.grasps(session_id, **options),
+        "target" if new_frame and not turn_average else "",
         post_frame if new_frame else None,
     )
     return operation, grasps
@@ -791,12 +794,13 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
+        grasps_turns, _ = http_grasp_operation(client, frames, GRASPS_HTTP_TURNS, turn_average=True)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, plan_turns, grasps_http, grasps_kept, grasps_again]
+            + [plan, plan_turns, grasps_http, grasps_turns, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
@@ -813,6 +817,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
     plan_turns = find(rows, PLAN_TURNS)
     plan_turns.note = f"{plan_turns.p50 / find(rows, PLAN).p50:.2f}x {PLAN} (paired)"
+    grasps_turns = find(rows, GRASPS_HTTP_TURNS)
+    grasps_turns.note = f"{grasps_turns.p50 / find(rows, GRASPS_HTTP).p50:.2f}x {GRASPS_HTTP} (paired)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
 

@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
             ("turns", planner.infer(grid, turn_average=True)),
         ):
             scores[form].append(output.quality[at_labels])
-            predicted = torch.from_numpy(output.rotation[(slice(None), *at_labels)].T[positive].copy())
+            rotation = output.rotation_where()  # every voxel: labels may lie outside the grasp region
+            predicted = torch.from_numpy(rotation[(slice(None), *at_labels)].T[positive].copy())
             errors[form].append(rotation_error_deg(predicted, target).numpy())
         labels.append(scene.labels.label.numpy())
         sources.append(np.full(len(scene.labels), scene.scene_id.split("-")[0]))

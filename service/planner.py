@@ -18,7 +18,7 @@ from service.errors import ModelNotReady
 from service.runtime import usable_cores
 from service.vgn.batching import MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
-from service.vgn.detection import DetectionConfig, detect_grasps, grasp_region
+from service.vgn.detection import DetectionConfig, grasp_scores, grasps_from_scores
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
 from service.vgn.turns import average_turned_quality, average_turned_rotation, turned_grids
@@ -113,11 +113,24 @@ class InferenceOptions:
 
 @dataclass
 class NetworkOutput:
-    """Voxel-wise network output as numpy: quality (N³), rotation (4, N³), width (N³ voxels)."""
+    """Voxel-wise network output as numpy: quality (N³), rotation (4, N³), width (N³ voxels).
+
+    A turn-averaged output also keeps the four turns' rotations (``turned_rotations``, 4 MB for
+    a 40³ grid) and averages them only where asked (:meth:`rotation_where`): a request reads
+    the orientation of a few hundred voxels, and averaging all 64,000 would cost more than
+    the rest of the averaging together."""
 
     quality: np.ndarray
     rotation: np.ndarray
     width: np.ndarray
+    turned_rotations: np.ndarray | None = None
+
+    def rotation_where(self, where: np.ndarray | None = None) -> np.ndarray:
+        """Orientations (4, N³): turn-averaged at the voxels ``where`` marks (all voxels when
+        ``None``) for a turn-averaged output, elsewhere (and otherwise) :attr:`rotation`."""
+        if self.turned_rotations is None:
+            return self.rotation
+        return average_turned_rotation(self.turned_rotations, where)
 
 
 class GraspPlanner:
@@ -206,8 +219,8 @@ class GraspPlanner:
 
         With ``turn_average`` quality and orientation are the means over the grid's four
         quarter turns about gravity (one batch of four grids; see :mod:`service.vgn.turns`);
-        widths stay those of the unturned grid. Orientations are averaged in the grasp region
-        only, the voxels detection can return (elsewhere they are the unturned grid's).
+        widths stay those of the unturned grid. Orientations are averaged on demand
+        (:meth:`NetworkOutput.rotation_where`); ``rotation`` holds the unturned grid's.
         """
         if self._network is None:
             raise ModelNotReady(NO_MODEL_MESSAGE)
@@ -217,8 +230,7 @@ class GraspPlanner:
         outputs = self._batcher.run_many(list(turned_grids(grid)))  # rows of one stacked array: contiguous
         quality = average_turned_quality(np.stack([output.quality for output in outputs]))
         rotations = np.stack([output.rotation for output in outputs])
-        rotation = average_turned_rotation(rotations, where=grasp_region(grid))
-        return NetworkOutput(quality, rotation, outputs[0].width)
+        return NetworkOutput(quality, outputs[0].rotation, outputs[0].width, turned_rotations=rotations)
 
     def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:
         """One forward pass over (B, N, N, N) grids, split into up to ``lanes`` parts that run
@@ -264,6 +276,6 @@ class GraspPlanner:
     ) -> list[Grasp]:
         """World-frame grasps, best first, from the network's ``output`` on ``grid``."""
         config = detection_config(query, resolved_threshold(query, self.default_threshold))
-        return detect_grasps(
-            grid, output.quality, output.rotation, output.width, voxel_size, workspace_pose, config
-        )
+        score = grasp_scores(grid, output.quality, output.width, voxel_size, config)
+        rotation = output.rotation_where(score > 0)  # the only voxels detection reads
+        return grasps_from_scores(score, rotation, output.width, voxel_size, workspace_pose, config)

@@ -58,12 +58,14 @@ class SoftTargets:
 def soft_targets(teacher: GraspPlanner, grid: np.ndarray) -> SoftTargets:
     """The teacher's turn-averaged answer for one (N, N, N) grid at its grasp-region voxels."""
     output = teacher.infer(grid, turn_average=True)
-    voxel = np.argwhere(grasp_region(grid))
+    region = grasp_region(grid)
+    voxel = np.argwhere(region)
     index = tuple(voxel.T)
+    rotation = output.rotation_where(region)
     return SoftTargets(
         voxel=voxel.astype(np.uint8),
         quality=output.quality[index].astype(np.float16),
-        quaternion=output.rotation[(slice(None), *index)].T.astype(np.float16),
+        quaternion=rotation[(slice(None), *index)].T.astype(np.float16),
         width=output.width[index].astype(np.float16),
     )
 

@@ -60,11 +60,40 @@ def detect_grasps(
         near_surface: ``grasp_region(grid, config)`` when the caller computed it already
             (it depends on the grid only, so it can be worked out while the network runs).
     """
+    score = grasp_scores(grid, quality, width, voxel_size, config, near_surface)
+    return grasps_from_scores(score, rotation, width, voxel_size, workspace_pose, config)
+
+
+def grasp_scores(
+    grid: np.ndarray,
+    quality: np.ndarray,
+    width: np.ndarray,
+    voxel_size: float,
+    config: DetectionConfig = DetectionConfig(),
+    near_surface: np.ndarray | None = None,
+) -> np.ndarray:
+    """(N, N, N) smoothed quality where a grasp may be returned, zero elsewhere: the first
+    half of :func:`detect_grasps`, which reads no orientation (so a caller can work out
+    orientations only where this is positive)."""
     if near_surface is None:
         near_surface = grasp_region(grid, config)
     score = _valid_quality(near_surface, quality, width, config)
     if config.crop_min is not None or config.crop_max is not None:
         score *= _crop_mask(score.shape, voxel_size, config)
+    return score
+
+
+def grasps_from_scores(
+    score: np.ndarray,
+    rotation: np.ndarray,
+    width: np.ndarray,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+    config: DetectionConfig = DetectionConfig(),
+) -> list[Grasp]:
+    """The second half of :func:`detect_grasps`: the approach cone, non-maximum suppression
+    and ranking over :func:`grasp_scores`' output; reads orientations where it is positive only."""
+    score = score.copy()
     candidates = np.argwhere(score > 0)
     if config.approach is not None and len(candidates):
         outside_cone = ~_inside_cone(candidates, rotation, workspace_pose, config)

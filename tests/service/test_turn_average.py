@@ -25,6 +25,7 @@ from service.vgn.batching import MicroBatcher
 from service.vgn.detection import grasp_region
 from service.vgn.turns import (
     TURNS,
+    _read_back,
     average_turned_quality,
     average_turned_rotation,
     turned_grids,
@@ -104,13 +105,14 @@ def test_the_planner_averages_the_shipped_models_outputs_over_the_turns():
     qualities = np.stack([output.quality for output in one_by_one])
     rotations = np.stack([output.rotation for output in one_by_one])
     np.testing.assert_allclose(averaged.quality, average_turned_quality(qualities), atol=1e-5)
+    np.testing.assert_allclose(averaged.rotation_where(), average_turned_rotation(rotations), atol=1e-4)
+    # Orientations are averaged where asked only; elsewhere they are the unturned grid's.
     region = grasp_region(grid)
     assert region.any() and not region.all()
-    np.testing.assert_allclose(
-        averaged.rotation[:, region], average_turned_rotation(rotations)[:, region], atol=1e-4
-    )
-    # Detection never reads an orientation outside the grasp region: there it is the unturned one.
-    np.testing.assert_allclose(averaged.rotation[:, ~region], plain.rotation[:, ~region], atol=1e-4)
+    some = averaged.rotation_where(region)
+    np.testing.assert_allclose(some[:, region], average_turned_rotation(rotations)[:, region], atol=1e-4)
+    np.testing.assert_allclose(some[:, ~region], plain.rotation[:, ~region], atol=1e-4)
+    assert plain.rotation_where(region) is plain.rotation
     # Widths are the unturned grid's (from a batch of four: float32 rounding apart).
     np.testing.assert_allclose(averaged.width, plain.width, atol=1e-4)
     assert not np.allclose(averaged.quality, plain.quality, atol=1e-3), "the turns disagree somewhere"
@@ -193,6 +195,18 @@ def test_orientations_that_turn_with_the_scene_average_back_to_the_unturned_ones
         for axis in range(4):
             turned[k, axis][to_i[on_grid], to_j[on_grid]] = rotated[..., axis].numpy()[on_grid]
     np.testing.assert_allclose(average_turned_rotation(turned), reference, atol=1e-5)
+
+
+@pytest.mark.parametrize("quarter_turns", [0, 1, 2, 3, 5])
+def test_reading_back_a_turned_output_follows_the_turned_index(quarter_turns: int):
+    field = np.random.default_rng(quarter_turns).random((N, N, 3)).astype(np.float32)
+    to_i, to_j = turned_index(N, quarter_turns)
+    on_grid = (to_i >= 0) & (to_i < N) & (to_j >= 0) & (to_j < N)
+    expected = np.zeros_like(field)
+    expected[on_grid] = field[to_i[on_grid], to_j[on_grid]]
+    values, mask = _read_back(field, quarter_turns)
+    np.testing.assert_array_equal(values, expected)
+    np.testing.assert_array_equal(mask, on_grid)
 
 
 def test_averaging_some_voxels_gives_the_full_fields_answer_there():
