@@ -85,18 +85,18 @@ def average_turned_rotation(rotations: np.ndarray, where: np.ndarray | None = No
     reference = rotations[0]
     if where is None:
         total = reference.astype(np.float32, copy=True)
-        for k in TURNS[1:]:
-            total += _aligned_back(np.stack([_read_back(row, k)[0] for row in rotations[k]]), reference, k)
+        for k, turned in zip(TURNS[1:], rotations[1:], strict=True):
+            total += _aligned_back(np.stack([_read_back(row, k)[0] for row in turned]), reference, k)
         return total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)
     n = rotations.shape[-1]
     i, j, depth = np.nonzero(where)
     chosen_reference = reference[:, i, j, depth]
     total = chosen_reference.astype(np.float32, copy=True)
-    for k in TURNS[1:]:
+    for k, field in zip(TURNS[1:], rotations[1:], strict=True):
         turned_i, turned_j = (index[i, j] for index in turned_index(n, k))
         on_grid = (turned_i >= 0) & (turned_i < n) & (turned_j >= 0) & (turned_j < n)
         turned = np.zeros_like(chosen_reference)
-        turned[:, on_grid] = rotations[k][:, turned_i[on_grid], turned_j[on_grid], depth[on_grid]]
+        turned[:, on_grid] = field[:, turned_i[on_grid], turned_j[on_grid], depth[on_grid]]
         total += _aligned_back(turned, chosen_reference, k)
     averaged = reference.copy()
     averaged[:, i, j, depth] = total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)
