@@ -32,7 +32,7 @@ from service.planner import (
     antipodal_config,
     resolved_threshold,
 )
-from service.runtime import configured_threads, runtime_report
+from service.runtime import configured_threads, runtime_report, tune_malloc
 from service.sessions import SessionStore
 from service.settings import Settings
 
@@ -66,6 +66,7 @@ class PlanningService:
         import torch
 
         torch.set_num_threads(settings.torch_threads or configured_threads())
+        tune_malloc()
         options = InferenceOptions(
             settings.inference, settings.precision, settings.batch_window_ms, settings.max_batch
         )

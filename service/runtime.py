@@ -13,6 +13,12 @@ the same time on every run. So, unless the operator says otherwise:
   this package as well and so trains with it; ``benchmarks/training_openmp.py`` checks that
   this does not slow a training step (it made one about 2x faster on the loaded 2-core VM).
 
+* glibc's allocator keeps freed blocks of up to 32 MB for reuse instead of giving each one back
+  to the kernel (:func:`tune_malloc`). By default blocks over 128 kB-32 MB (the threshold moves)
+  are mapped fresh on every allocation and unmapped on free; a turn-averaged grasp request
+  allocates ~10 MB of network outputs in several threads, and paying page faults for all of it
+  took its planning in the server from 17.8 to 22.1 ms p50 (30 requests each way, 2-core VM).
+
 libgomp reads its environment once, when torch's import loads it, so
 :func:`prepare_environment` runs from ``service/__init__.py``: ``uvicorn service.app:app``
 and the client's embedded service (a child process running the same command) import the
@@ -21,6 +27,8 @@ package before anything imports torch. Variables already set are never overridde
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import os
 import sys
 from typing import Any
@@ -28,6 +36,17 @@ from typing import Any
 #: Environment defaults the service sets when the operator has not.
 WAIT_POLICY = "PASSIVE"
 MAX_DEFAULT_THREADS = 8
+
+#: glibc ``mallopt`` parameters (malloc.h) and the service's values: keep freed blocks up to
+#: the largest mmap threshold glibc accepts on 64-bit systems (32 MB), and trim the heap top
+#: only beyond 256 MB.
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+MALLOC_SETTINGS = {
+    "mmap_threshold": (M_MMAP_THRESHOLD, 32 << 20),
+    "trim_threshold": (M_TRIM_THRESHOLD, 256 << 20),
+}
+#: glibc's own variables for the same: an operator who sets one keeps glibc's reading of it.
+MALLOC_VARIABLES = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")
 
 #: What :func:`prepare_environment` found and did, for ``GET /model``.
 _prepared: dict[str, Any] = {}
@@ -70,6 +89,40 @@ def prepare_environment(environ: dict[str, str] | os._Environ = os.environ) -> d
     return report
 
 
+def tune_malloc(environ: dict[str, str] | os._Environ = os.environ) -> dict[str, Any]:
+    """Apply :data:`MALLOC_SETTINGS` with glibc's ``mallopt`` (process-wide, at once), unless the
+    operator tuned malloc through its variables or the C library is not glibc; returns what
+    was set, for ``GET /model``."""
+    if any(environ.get(name) for name in MALLOC_VARIABLES):
+        report: dict[str, Any] = {"set_by_service": False, "reason": "set by the operator's variables"}
+    else:
+        mallopt = _glibc_mallopt()
+        if mallopt is None:
+            report = {"set_by_service": False, "reason": "not glibc"}
+        else:
+            applied = {
+                name: value for name, (param, value) in MALLOC_SETTINGS.items() if mallopt(param, value) == 1
+            }
+            report = {"set_by_service": bool(applied), **applied}
+    _prepared["malloc"] = report
+    return report
+
+
+def _glibc_mallopt() -> Any | None:
+    name = ctypes.util.find_library("c")
+    if sys.platform != "linux" or not name:
+        return None
+    try:
+        libc = ctypes.CDLL(name)
+        if not hasattr(libc, "gnu_get_libc_version"):  # musl and others have no mallopt thresholds
+            return None
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return None
+    mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
+    return mallopt
+
+
 def apply_threads() -> int:
     """Give torch the configured intra-op thread count (after the environment is prepared)."""
     import torch
@@ -89,5 +142,6 @@ def runtime_report() -> dict[str, Any]:
         "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
         "omp_set_by_service": _prepared.get("set_by_service", []),
         "omp_applied_before_torch": bool(_prepared.get("before_torch", False)),
+        "malloc": _prepared.get("malloc", {"set_by_service": False, "reason": "not applied in this process"}),
         "torch": torch.__version__,
     }
