@@ -3,12 +3,29 @@ them, and says so in ``GET /model``."""
 
 from __future__ import annotations
 
+import platform
+
 import httpx
 
 from client.embedded import EmbeddedService
-from service.runtime import WAIT_POLICY, configured_threads, default_threads, prepare_environment
+from service.runtime import (
+    MALLOC_SETTINGS,
+    MALLOC_VARIABLES,
+    WAIT_POLICY,
+    configured_threads,
+    default_threads,
+    prepare_environment,
+    tune_malloc,
+)
 
-OPERATOR_VARIABLES = ("OMP_WAIT_POLICY", "OMP_NUM_THREADS", "VGN_TORCH_THREADS", "GOMP_SPINCOUNT")
+OPERATOR_VARIABLES = (
+    "OMP_WAIT_POLICY",
+    "OMP_NUM_THREADS",
+    "VGN_TORCH_THREADS",
+    "GOMP_SPINCOUNT",
+    *MALLOC_VARIABLES,
+)
+ON_GLIBC = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
 
 
 def test_default_threads_leave_cores_to_the_rest_of_the_service():
@@ -26,6 +43,21 @@ def test_the_operator_s_openmp_settings_win():
     assert environ["OMP_WAIT_POLICY"] == WAIT_POLICY
 
 
+def test_malloc_is_tuned_on_glibc_unless_the_operator_tuned_it():
+    assert tune_malloc({"MALLOC_MMAP_THRESHOLD_": "65536"}) == {
+        "set_by_service": False,
+        "reason": "set by the operator's variables",
+    }
+    report = tune_malloc({})
+    if ON_GLIBC:
+        assert report == {
+            "set_by_service": True,
+            **{name: value for name, (_, value) in MALLOC_SETTINGS.items()},
+        }
+    else:
+        assert report["set_by_service"] is False
+
+
 def test_a_plain_start_sets_openmp_before_torch_and_reports_it(random_checkpoint):
     """``uvicorn service.app:app`` with none of the variables set, as the embedded service
     (and an operator) starts it."""
@@ -38,3 +70,4 @@ def test_a_plain_start_sets_openmp_before_torch_and_reports_it(random_checkpoint
     assert runtime["omp_applied_before_torch"] is True
     assert runtime["torch_threads"] == default_threads(runtime["usable_cores"])
     assert runtime["inference"] == "fast" and runtime["precision"] in ("bfloat16", "float32")
+    assert runtime["malloc"]["set_by_service"] is ON_GLIBC
