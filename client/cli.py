@@ -32,7 +32,8 @@ from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
 TURN_AVERAGE_HELP = (
-    "score and orient grasps by the network's outputs averaged over four quarter turns of the grid (VGN only)"
+    "score and orient grasps by the network's outputs averaged over four quarter turns of the grid, or not "
+    "(VGN only; default: the service's, on unless its operator turned it off)"
 )
 
 
@@ -81,7 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="drop grasps whose open hand would touch the observed surface on its approach",
     )
-    grasps.add_argument("--turn-average", action="store_true", help=TURN_AVERAGE_HELP)
+    grasps.add_argument("--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP)
 
     view = commands.add_parser(
         "view",
@@ -102,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
     view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
     view.add_argument("--clearance", action="store_true", help="only grasps whose approach is clear")
-    view.add_argument("--turn-average", action="store_true", help=TURN_AVERAGE_HELP)
+    view.add_argument("--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP)
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -204,7 +205,9 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
         help="ask for grasps whose open hand clears the observed surface on its approach (recorded in config.json)",
     )
     clear.add_argument(
-        "--turn-average", action="store_true", help=TURN_AVERAGE_HELP + " (recorded in config.json)"
+        "--turn-average",
+        action=argparse.BooleanOptionalAction,
+        help=TURN_AVERAGE_HELP + " (what was used is recorded in config.json)",
     )
     clear.add_argument(
         "--results",
@@ -292,9 +295,10 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
-    for switch in ("clearance", "turn_average"):
-        if getattr(args, switch):
-            options[switch] = True
+    if args.clearance:
+        options["clearance"] = True
+    if args.turn_average is not None:
+        options["turn_average"] = args.turn_average
     try:
         page = vgn.view_page(args.session_id, **options)
     except ValueError as error:  # the options broke GraspQuery's rules before anything was sent

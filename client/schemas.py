@@ -260,12 +260,13 @@ class GraspQuery(_Model):
         "franka-v2 dimensions) would touch the observed surface while approaching from 5 cm back "
         "along the approach; applies to both planners, before max_grasps",
     )
-    turn_average: bool = Field(
-        default=False,
+    turn_average: bool | None = Field(
+        default=None,
         description="vgn only: score each grasp by the network's quality averaged over the grid "
         "turned by 0, 90, 180 and 270 degrees about the workspace z axis (the turns VGN trains "
-        "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 3x the "
-        "time of a plain request on 2 CPU cores; widths stay those of the unturned grid",
+        "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 2x the "
+        "time of a plain request on 2 CPU cores; widths stay those of the unturned grid. Unset: the "
+        "service's default (VGN_TURN_AVERAGE, on unless the operator turned it off; /model runtime says)",
     )
 
     @field_validator("crop_min", "crop_max", "approach", mode="before")
@@ -304,9 +305,10 @@ class GraspQuery(_Model):
     def to_params(self) -> dict[str, Any]:
         """Query parameters for the request, the options left unset (and switches when off) omitted."""
         params = self.model_dump(exclude_none=True)
-        for switch in ("clearance", "turn_average"):
-            if params.pop(switch):
-                params[switch] = "true"
+        if params.pop("clearance"):
+            params["clearance"] = "true"
+        if "turn_average" in params:  # unset means the service's default, so off is sent too
+            params["turn_average"] = "true" if params["turn_average"] else "false"
         return params
 
 
@@ -337,6 +339,9 @@ class GraspResult(_Model):
     threshold: float = Field(description="the quality threshold these grasps passed")
     clearance_dropped: int | None = Field(
         default=None, description="grasps the clearance check dropped; null when it was not asked for"
+    )
+    turn_average: bool | None = Field(
+        default=None, description="vgn: whether the request was turn-averaged; null for antipodal"
     )
 
 

@@ -168,6 +168,7 @@ class PlanningService:
         with ``planner="antipodal"``, by the geometric baseline on its cloud (no model needed)."""
         self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
         baseline = query.planner == "antipodal"
+        turn_average = None
         if not baseline and not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         with self.sessions.use(session_id) as session:
@@ -185,9 +186,10 @@ class PlanningService:
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
             threshold = config.threshold
         else:
-            key = (revision, query.turn_average)
+            turn_average = self.settings.turn_average if query.turn_average is None else query.turn_average
+            key = (revision, turn_average)
             reuse = self.settings.reuse_output and kept is not None and kept[0] == key
-            output = kept[1] if reuse else self.planner.infer(observed, query.turn_average)
+            output = kept[1] if reuse else self.planner.infer(observed, turn_average)
             grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, ranked)
             if self.settings.reuse_output and not reuse:
                 self._keep_output(session_id, key, output)
@@ -205,6 +207,7 @@ class PlanningService:
             model=model,
             threshold=threshold,
             clearance_dropped=dropped,
+            turn_average=turn_average,
         )
 
     def _keep_output(self, session_id: str, key: tuple[int, bool], output: object) -> None:
@@ -230,5 +233,9 @@ class PlanningService:
             conventions=CONVENTIONS,
             threshold=self.planner.default_threshold,
             card=self.planner.card,
-            runtime={**runtime_report(), **self.planner.runtime()},
+            runtime={
+                **runtime_report(),
+                **self.planner.runtime(),
+                "turn_average": self.settings.turn_average,
+            },
         )

@@ -23,13 +23,17 @@ from sim_worker.results import ResultsFolder, RoundRecord
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     """``config`` with the planner's identity filled in: the weights' id (a resume with other
-    weights is refused) and the threshold actually used when none was given."""
+    weights is refused), and the threshold and turn averaging actually used when not given
+    (the service's defaults; a service from before the turn-averaging default did not)."""
     if config.planner == "vgn":
         model = vgn.model()
         threshold = model.threshold if config.threshold is None else config.threshold
-        return dataclasses.replace(config, model=model.model_id, threshold=threshold)
+        turns = config.turn_average
+        if turns is None:
+            turns = bool((model.runtime or {}).get("turn_average", False))
+        return dataclasses.replace(config, model=model.model_id, threshold=threshold, turn_average=turns)
     threshold = ANTIPODAL_DEFAULT_THRESHOLD if config.threshold is None else config.threshold
-    return dataclasses.replace(config, model="antipodal", threshold=threshold)
+    return dataclasses.replace(config, model="antipodal", threshold=threshold, turn_average=False)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -48,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         planner=args.planner,
         renderer=args.renderer,
         clearance=getattr(args, "clearance", False),
-        turn_average=getattr(args, "turn_average", False),
+        turn_average=getattr(args, "turn_average", None),
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
     results_dir.mkdir(parents=True, exist_ok=True)

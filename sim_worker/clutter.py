@@ -54,7 +54,9 @@ class ClutterConfig:
     renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
     clearance: bool = False  # ask the service to drop grasps whose approach hits observed geometry
-    turn_average: bool = False  # ask VGN for qualities averaged over four quarter turns of the grid
+    # Ask VGN for outputs averaged over four quarter turns of the grid; None: the service's default
+    # (resolve_planner records what that was before a run starts).
+    turn_average: bool | None = None
 
     def __post_init__(self) -> None:
         for name, allowed in (

@@ -181,8 +181,8 @@ def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
     message.nms_size = query.nms_size
     if query.clearance:
         message.clearance = True
-    if query.turn_average:
-        message.turn_average = True
+    if query.turn_average is not None:
+        message.turn_average = query.turn_average
     crop_min, crop_max = query.crop_box or (None, None)
     for name, values in (
         ("crop_min", crop_min),
@@ -256,6 +256,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
         model=message.model,
         threshold=message.threshold,
         clearance_dropped=message.clearance_dropped if message.HasField("clearance_dropped") else None,
+        turn_average=message.turn_average if message.HasField("turn_average") else None,
     )
 
 

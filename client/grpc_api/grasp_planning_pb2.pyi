@@ -226,7 +226,7 @@ class Grasp(_message.Message):
     def __init__(self, position: _Optional[_Union[Vector3, _Mapping]] = ..., orientation: _Optional[_Union[Quaternion, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., width: _Optional[float] = ..., quality: _Optional[float] = ...) -> None: ...
 
 class GraspResult(_message.Message):
-    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped")
+    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average")
     GRASPS_FIELD_NUMBER: _ClassVar[int]
     PLANNING_MS_FIELD_NUMBER: _ClassVar[int]
     INTEGRATION_MS_FIELD_NUMBER: _ClassVar[int]
@@ -234,6 +234,7 @@ class GraspResult(_message.Message):
     MODEL_FIELD_NUMBER: _ClassVar[int]
     THRESHOLD_FIELD_NUMBER: _ClassVar[int]
     CLEARANCE_DROPPED_FIELD_NUMBER: _ClassVar[int]
+    TURN_AVERAGE_FIELD_NUMBER: _ClassVar[int]
     grasps: _containers.RepeatedCompositeFieldContainer[Grasp]
     planning_ms: float
     integration_ms: float
@@ -241,7 +242,8 @@ class GraspResult(_message.Message):
     model: str
     threshold: float
     clearance_dropped: int
-    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ...) -> None: ...
+    turn_average: bool
+    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ...) -> None: ...
 
 class GetGridRequest(_message.Message):
     __slots__ = ("session_id",)

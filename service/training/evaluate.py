@@ -61,6 +61,7 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
             episode.close()
     settings = dataclasses.asdict(config) | {
         "threshold": clutter.threshold,
+        "turn_average": clutter.turn_average,
         "objects": Path(config.objects).name,
     }
     return {"settings": settings, **summary}

@@ -9,7 +9,7 @@ from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 
 def forwards(core: PlanningService) -> int:
-    return core.planner.runtime()["batches"]["grids"]
+    return core.planner.runtime()["batches"]["batches"]
 
 
 def test_the_network_runs_again_only_when_the_volume_changed(core: PlanningService):

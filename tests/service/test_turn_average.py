@@ -17,7 +17,7 @@ from client.schemas import GraspQuery, GraspResult, SessionCreate
 from service.core import PlanningService
 from service.grpc.server import build_server
 from service.planner import GraspPlanner, InferenceOptions
-from service.settings import PACKAGED_MODEL
+from service.settings import PACKAGED_MODEL, Settings
 from service.training.augment import rotate_z
 from service.training.labels import LabelSet
 from service.training.quaternions import about_z, flipped, multiply
@@ -124,12 +124,34 @@ def test_a_kept_output_serves_only_requests_with_the_same_averaging(core: Planni
     scene = BoxScene()
     for pose in circle_views(3):
         core.add_frame(session, scene.depth(pose), pose)
-    plain, averaged = GraspQuery(threshold=0.0), GraspQuery(threshold=0.0, turn_average=True)
+    plain, averaged = (
+        GraspQuery(threshold=0.0, turn_average=False),
+        GraspQuery(threshold=0.0, turn_average=True),
+    )
     first_plain = core.plan(session, plain).grasps
     first_averaged = core.plan(session, averaged).grasps
     assert first_averaged != first_plain
     assert core.plan(session, plain).grasps == first_plain
     assert core.plan(session, averaged).grasps == first_averaged
+    assert core.plan(session, GraspQuery(threshold=0.0)).grasps == first_averaged, "the default is on"
+
+
+def test_the_operator_chooses_the_default_and_requests_may_override_it(random_checkpoint):
+    core = PlanningService.from_settings(Settings(model=random_checkpoint, api_key=None, turn_average=False))
+    try:
+        session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+        scene = BoxScene()
+        for pose in circle_views(3):
+            core.add_frame(session, scene.depth(pose), pose)
+        default = core.plan(session, GraspQuery(threshold=0.0))
+        plain = core.plan(session, GraspQuery(threshold=0.0, turn_average=False))
+        averaged = core.plan(session, GraspQuery(threshold=0.0, turn_average=True))
+        assert default.grasps == plain.grasps != averaged.grasps
+        assert (default.turn_average, averaged.turn_average) == (False, True)
+        assert core.plan(session, GraspQuery(planner="antipodal")).turn_average is None
+        assert core.model_info().runtime["turn_average"] is False
+    finally:
+        core.close()
 
 
 def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsys):
@@ -141,15 +163,19 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     scene = BoxScene()
     for pose in circle_views(3):
         vgn.add_frame(session, scene.depth(pose), pose)
-    plain = vgn.grasps(session, threshold=0.0)
+    plain = vgn.grasps(session, threshold=0.0, turn_average=False)
     averaged = vgn.grasps(session, threshold=0.0, turn_average=True)
     assert averaged.grasps and averaged.grasps != plain.grasps
-    assert vgn.grasps(session, threshold=0.0, turn_average=False).grasps == plain.grasps
+    assert (plain.turn_average, averaged.turn_average) == (False, True)
+    default = vgn.grasps(session, threshold=0.0)
+    assert default.grasps == averaged.grasps and default.turn_average, "on unless the operator says"
+    assert vgn.model().runtime["turn_average"] is True
     bad = httpx.get(f"{vgn.url}/sessions/{session}/grasps", params={"turn_average": "maybe"})
     assert bad.status_code == 422 and "turn_average" in bad.json()["message"]
 
-    assert main(["grasps", session, "--url", vgn.url, "--threshold", "0", "--turn-average", "--json"]) == 0
-    assert GraspResult.model_validate_json(capsys.readouterr().out).grasps == averaged.grasps[:10]
+    for option, expected in (("--turn-average", averaged), ("--no-turn-average", plain)):
+        assert main(["grasps", session, "--url", vgn.url, "--threshold", "0", option, "--json"]) == 0
+        assert GraspResult.model_validate_json(capsys.readouterr().out).grasps == expected.grasps[:10]
 
     local = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
     for pose in circle_views(3):
@@ -157,9 +183,11 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     server, port = build_server(core, "127.0.0.1", 0)
     try:
         with GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
-            for turn_average in (False, True):
+            for turn_average in (False, True, None):
                 expected = core.plan(local, GraspQuery(threshold=0.0, turn_average=turn_average))
-                assert rpc.grasps(local, threshold=0.0, turn_average=turn_average).grasps == expected.grasps
+                answer = rpc.grasps(local, threshold=0.0, turn_average=turn_average)
+                assert answer.grasps == expected.grasps
+                assert answer.turn_average is (turn_average is not False)
     finally:
         server.stop(None)
 

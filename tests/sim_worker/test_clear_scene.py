@@ -172,6 +172,16 @@ def test_clear_scene_records_its_grasp_options(server, tmp_path: Path, option: s
     assert said in run.stdout
 
 
+def test_clear_scene_records_the_services_turn_averaging_default_or_the_choice(server, tmp_path: Path):
+    for options, averaged in (((), True), (("--no-turn-average",), False)):
+        results = tmp_path / ("default" if not options else "plain")
+        run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
+                          *options, "--results", str(results))  # fmt: skip
+        assert run.returncode == 0, run.stderr
+        assert json.loads((results / "config.json").read_text()).get("turn_average", False) is averaged
+        assert ("turn averaging" in run.stdout) is averaged
+
+
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
     """Only VGN runs take the option: their folders end in -turns and their rows read vgn+turns."""
     from benchmarks.clutter import combinations, parse_args, scenario_config, table_row
@@ -192,6 +202,15 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
         table_row("antipodal", "random", "pile-5", antipodal.as_json(), {})["planner"]
         == "antipodal+clearance"
     )
+    default = parse_args(["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random"])
+    assert [folder.name for *_, folder in combinations(default)] == ["vgn-random-pile-5-turns"], (
+        "on, as the service"
+    )
+    plain = parse_args(
+        ["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random", "--no-turn-average"]
+    )
+    assert [folder.name for *_, folder in combinations(plain)] == ["vgn-random-pile-5"]
+    assert scenario_config(plain, "vgn", "random", "pile-5").turn_average is False
 
 
 def test_configs_without_the_clearance_check_keep_their_recorded_form():
