@@ -19,11 +19,11 @@ One run measures the p50 and p95 latency (milliseconds) of
    then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
-5. a grasp request in process: ``PlanningService.plan``, plain and with turn averaging (its
-   ratio to the plain request, paired in the same run);
+5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
+   (turn-averaged), and plain (``turn_average=false``; its ratio to the default, paired);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
-   so that each runs the network; and without new frames, when the service answers from
-   the session's last network output;
+   so that each runs the network, by default and plain; and without new frames, when the
+   service answers from the session's last network output;
 7. steadiness: the grasp request over HTTP again, on a second server started the same way;
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
    own client and session), which the service micro-batches into shared forward passes;
@@ -136,16 +136,16 @@ FRAME_HTTP = "VGNClient.add_frame (raw f32)"
 FRAME_HTTP_PACED = "VGNClient.add_frame (raw f32), 33 ms after the last call"
 #: Idle time before each paced upload: a 30 Hz depth camera.
 CAMERA_PERIOD_S = 1 / 30
-GRASPS_HTTP = "VGNClient.grasps"
-GRASPS_HTTP_TURNS = "VGNClient.grasps, turn averaging"
+GRASPS_HTTP = "VGNClient.grasps (service default: turn-averaged)"
+GRASPS_HTTP_PLAIN = "VGNClient.grasps, turn_average=false"
 FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
 GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
-PLAN = "PlanningService.plan"
-PLAN_TURNS = "PlanningService.plan, turn averaging"
+PLAN = "PlanningService.plan (default: turn-averaged)"
+PLAN_PLAIN = "PlanningService.plan, turn_average=false"
 
 
 # Measurement -------------------------------------------------------------------------------
@@ -495,11 +495,12 @@ def http_grasp_operation(
     name: str = GRASPS_HTTP,
     group: str = "6 grasps HTTP",
     new_frame: bool = True,
-    turn_average: bool = False,
+    turn_average: bool | None = None,
 ) -> tuple[Operation, int]:
     """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
     ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
-    the network; without, the service answers from its last network output."""
+    the network; without, the service answers from its last network output. ``turn_average``
+    ``None`` leaves the choice to the service's default, as a plain client does."""
     session_id = fused_session(client, frames)
     options = {"threshold": THRESHOLD, "turn_average": turn_average}
     grasps = len(client.grasps(session_id, **options).grasps)
@@ -514,7 +515,7 @@ def http_grasp_operation(
         name,
         group,
         lambda k: client.grasps(session_id, **options),
-        "target" if new_frame and not turn_average else "",
+        "target" if new_frame and turn_average is None else "",
         post_frame if new_frame else None,
     )
     return operation, grasps
@@ -789,18 +790,18 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         )
         network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
-        turns_query = GraspQuery(threshold=THRESHOLD, turn_average=True)
-        plan_turns, _ = core_plan_operation(core, frames, turns_query, PLAN_TURNS)
+        plain_query = GraspQuery(threshold=THRESHOLD, turn_average=False)
+        plan_plain, _ = core_plan_operation(core, frames, plain_query, PLAN_PLAIN)
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
-        grasps_turns, _ = http_grasp_operation(client, frames, GRASPS_HTTP_TURNS, turn_average=True)
+        grasps_plain, _ = http_grasp_operation(client, frames, GRASPS_HTTP_PLAIN, turn_average=False)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, plan_turns, grasps_http, grasps_turns, grasps_kept, grasps_again]
+            + [plan, plan_plain, grasps_http, grasps_plain, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
@@ -815,10 +816,9 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
-    plan_turns = find(rows, PLAN_TURNS)
-    plan_turns.note = f"{plan_turns.p50 / find(rows, PLAN).p50:.2f}x {PLAN} (paired)"
-    grasps_turns = find(rows, GRASPS_HTTP_TURNS)
-    grasps_turns.note = f"{grasps_turns.p50 / find(rows, GRASPS_HTTP).p50:.2f}x {GRASPS_HTTP} (paired)"
+    for default, plain in ((PLAN, PLAN_PLAIN), (GRASPS_HTTP, GRASPS_HTTP_PLAIN)):
+        row = find(rows, plain)
+        row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
 
