@@ -132,7 +132,8 @@ def bench_size(args: argparse.Namespace, size: int) -> None:
         )
     scene = args.scenario.split("-")[0]
     argv = ["--model", str(weights), "--rounds", str(args.rounds), "--seed", str(args.seed)]
-    argv += ["--planners", "vgn", "--selections", "random", "--scenarios", args.scenario]
+    # Plain requests: the curve measures the network alone, as its points always have.
+    argv += ["--planners", "vgn", "--selections", "random", "--scenarios", args.scenario, "--no-turn-average"]
     argv += ["--out", str(bench_folder(args.out, size))]
     if args.objects and scene in ("pile", "packed"):
         argv += [f"--{scene}-objects", str(args.objects)]
