@@ -20,9 +20,9 @@ One run measures the p50 and p95 latency (milliseconds) of
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
-   (turn-averaged), and plain (``turn_average=false``; its ratio to the default, paired);
+   (plain), and turn-averaged (``turn_average=true``; its ratio to the default, paired);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
-   so that each runs the network, by default and plain; and without new frames, when the
+   so that each runs the network, by default and turn-averaged; and without new frames, when the
    service answers from the session's last network output;
 7. steadiness: the grasp request over HTTP again, on a second server started the same way;
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
@@ -136,16 +136,16 @@ FRAME_HTTP = "VGNClient.add_frame (raw f32)"
 FRAME_HTTP_PACED = "VGNClient.add_frame (raw f32), 33 ms after the last call"
 #: Idle time before each paced upload: a 30 Hz depth camera.
 CAMERA_PERIOD_S = 1 / 30
-GRASPS_HTTP = "VGNClient.grasps (service default: turn-averaged)"
-GRASPS_HTTP_PLAIN = "VGNClient.grasps, turn_average=false"
+GRASPS_HTTP = "VGNClient.grasps (service default: plain)"
+GRASPS_HTTP_TURNS = "VGNClient.grasps, turn_average=true"
 FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
 GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
-PLAN = "PlanningService.plan (default: turn-averaged)"
-PLAN_PLAIN = "PlanningService.plan, turn_average=false"
+PLAN = "PlanningService.plan (default: plain)"
+PLAN_TURNS = "PlanningService.plan, turn_average=true"
 
 
 # Measurement -------------------------------------------------------------------------------
@@ -790,18 +790,18 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         )
         network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
-        plain_query = GraspQuery(threshold=THRESHOLD, turn_average=False)
-        plan_plain, _ = core_plan_operation(core, frames, plain_query, PLAN_PLAIN)
+        turns_query = GraspQuery(threshold=THRESHOLD, turn_average=True)
+        plan_turns, _ = core_plan_operation(core, frames, turns_query, PLAN_TURNS)
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
-        grasps_plain, _ = http_grasp_operation(client, frames, GRASPS_HTTP_PLAIN, turn_average=False)
+        grasps_turns, _ = http_grasp_operation(client, frames, GRASPS_HTTP_TURNS, turn_average=True)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, plan_plain, grasps_http, grasps_plain, grasps_kept, grasps_again]
+            + [plan, plan_turns, grasps_http, grasps_turns, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
@@ -816,8 +816,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
-    for default, plain in ((PLAN, PLAN_PLAIN), (GRASPS_HTTP, GRASPS_HTTP_PLAIN)):
-        row = find(rows, plain)
+    for default, turns in ((PLAN, PLAN_TURNS), (GRASPS_HTTP, GRASPS_HTTP_TURNS)):
+        row = find(rows, turns)
         row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
