@@ -208,9 +208,12 @@ def test_all_sessions_busy_is_503_over_http(keyed: VGNClient):
     for depth, pose in zip(DEPTHS, POSES, strict=True):
         keyed.add_frame(session.session_id, depth, pose)
     refused: list[ServiceUnavailable] = []
-    for _ in range(5):  # the antipodal planner holds the session for a second or more
+    # The antipodal planner holds the session for a second or more, but the create may still
+    # reach the server before the plan does: each try waits a different head start for the plan.
+    for head_start_s in (0.0, 0.2, 0.05, 0.5, 0.1, 0.3, 0.8, 0.02):
         planning = threading.Thread(target=plan_unless_evicted, args=(keyed, session.session_id))
         planning.start()
+        time.sleep(head_start_s)
         while planning.is_alive() and not refused:
             try:
                 keyed.delete_session(keyed.create_session(intrinsics=INTRINSICS).session_id)
