@@ -14,7 +14,13 @@ from service.settings import PACKAGED_MODEL
 from service.vgn.agreement import Tolerance, disagreements, voxelwise_disagreements
 from service.vgn.checkpoint import load_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
-from service.vgn.fast import FastVGN, polyphase_weights
+from service.vgn.fast import (
+    FastVGN,
+    pixel_shuffle_3d,
+    polyphase_weights,
+    space_to_depth,
+    space_to_depth_weights,
+)
 from service.vgn.network import VGN
 from tests.helpers.grids import recorded_grids
 
@@ -45,10 +51,19 @@ def test_a_folded_convolution_equals_convolving_the_upsampled_input():
         x = torch.rand(1, 3, 4, 5, 6, dtype=torch.float64)
         expected = conv(torch.nn.functional.interpolate(x, scale_factor=2))
         weight, bias = polyphase_weights(conv.weight, conv.bias)
-        from service.vgn.fast import pixel_shuffle_3d
-
         folded = pixel_shuffle_3d(torch.nn.functional.conv3d(x, weight, bias, padding=1))
         assert torch.allclose(folded, expected, atol=1e-12)
+
+
+def test_a_strided_convolution_equals_a_convolution_over_the_parity_channels():
+    torch.manual_seed(1)
+    for kernel in (3, 5):
+        conv = torch.nn.Conv3d(2, 3, kernel, stride=2, padding=kernel // 2).double()
+        x = torch.rand(2, 2, 8, 10, 12, dtype=torch.float64)
+        weight = space_to_depth_weights(conv.weight)
+        folded = torch.nn.functional.conv3d(space_to_depth(x), weight, conv.bias, padding=1)
+        assert torch.allclose(folded, conv(x), atol=1e-12)
+    assert torch.equal(pixel_shuffle_3d(space_to_depth(x)), x)
 
 
 @pytest.mark.parametrize("resolution", [40, 48])
