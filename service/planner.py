@@ -123,7 +123,7 @@ class NetworkOutput:
     quality: np.ndarray
     rotation: np.ndarray
     width: np.ndarray
-    turned_rotations: np.ndarray | None = None
+    turned_rotations: tuple[np.ndarray, ...] | None = None
 
     def rotation_where(self, where: np.ndarray | None = None) -> np.ndarray:
         """Orientations (4, N³): turn-averaged at the voxels ``where`` marks (all voxels when
@@ -228,8 +228,8 @@ class GraspPlanner:
         if not turn_average:
             return self._batcher.run(grid)
         outputs = self._batcher.run_many(list(turned_grids(grid)))  # rows of one stacked array: contiguous
-        quality = average_turned_quality(np.stack([output.quality for output in outputs]))
-        rotations = np.stack([output.rotation for output in outputs])
+        quality = average_turned_quality([output.quality for output in outputs])
+        rotations = tuple(output.rotation for output in outputs)
         return NetworkOutput(quality, outputs[0].rotation, outputs[0].width, turned_rotations=rotations)
 
     def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:

@@ -13,6 +13,7 @@ for the half turn a row and a column) keep the answers of the turns that keep th
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -34,43 +35,52 @@ def turned_index(n: int, quarter_turns: int) -> tuple[np.ndarray, np.ndarray]:
     return i, j
 
 
+def _turned_view(field: np.ndarray, quarter_turns: int) -> tuple[tuple[slice, slice], np.ndarray]:
+    """Where an (N, N, N) output of the grid turned by ``quarter_turns`` lands in the unturned
+    grasp positions: the (i, j) region the turn keeps on the grid, and a view of ``field``
+    holding those positions' values in the region's order."""
+    # The slices below are turned_index's rule, (i, j) -> (N - j, i) per quarter turn, as views
+    # (4x faster than gathering with the index arrays); the tests check them against it.
+    n = field.shape[0]
+    every, rest = slice(None), slice(1, None)
+    reverse = slice(n - 1, 0, -1)  # field rows N-1 .. 1, read for i (or j) = 1 .. N-1
+    turns = quarter_turns % 4
+    if turns == 0:
+        return (every, every), field
+    if turns == 1:  # values[i, j] = field[N - j, i], j >= 1
+        return (every, rest), field[reverse].swapaxes(0, 1)
+    if turns == 2:  # values[i, j] = field[N - i, N - j], i, j >= 1
+        return (rest, rest), field[reverse, reverse]
+    return (rest, every), field[:, reverse].swapaxes(0, 1)  # values[i, j] = field[j, N - i], i >= 1
+
+
 def _read_back(field: np.ndarray, quarter_turns: int) -> tuple[np.ndarray, np.ndarray]:
     """An (N, N, N) output of the grid turned by ``quarter_turns``, read at each unturned grasp
     position's turned place; zero where the turn took the position off the grid, which the
     returned (N, N) mask marks False."""
-    # The slices below are turned_index's rule, (i, j) -> (N - j, i) per quarter turn, as views
-    # (4x faster than gathering with the index arrays); the tests check them against it.
-    n = field.shape[0]
+    region, view = _turned_view(field, quarter_turns)
     values = np.zeros_like(field)
-    on_grid = np.zeros((n, n), dtype=bool)
-    reverse = slice(n - 1, 0, -1)  # field rows N-1 .. 1, read for i (or j) = 1 .. N-1
-    turns = quarter_turns % 4
-    if turns == 0:
-        values[...], on_grid[...] = field, True
-    elif turns == 1:  # values[i, j] = field[N - j, i], j >= 1
-        values[:, 1:], on_grid[:, 1:] = field[reverse].swapaxes(0, 1), True
-    elif turns == 2:  # values[i, j] = field[N - i, N - j], i, j >= 1
-        values[1:, 1:], on_grid[1:, 1:] = field[reverse, reverse], True
-    else:  # values[i, j] = field[j, N - i], i >= 1
-        values[1:, :], on_grid[1:, :] = field[:, reverse].swapaxes(0, 1), True
+    on_grid = np.zeros(field.shape[:2], dtype=bool)
+    values[region], on_grid[region] = view, True
     return values, on_grid
 
 
-def average_turned_quality(qualities: np.ndarray) -> np.ndarray:
-    """(N, N, N) mean quality, in the unturned grid's voxels, of (4, N, N, N) network
+def average_turned_quality(qualities: Sequence[np.ndarray]) -> np.ndarray:
+    """(N, N, N) mean quality, in the unturned grid's voxels, of the four (N, N, N) network
     qualities on :func:`turned_grids` (each voxel averages the turns that keep it on the grid)."""
-    total = np.zeros(qualities.shape[1:], dtype=np.float64)
-    count = np.zeros(qualities.shape[1:3] + (1,), dtype=np.float64)
+    first = qualities[0]
+    total = np.zeros(first.shape, dtype=np.float64)
+    count = np.zeros(first.shape[:2] + (1,), dtype=np.float64)
     for k, quality in zip(TURNS, qualities, strict=True):
-        values, on_grid = _read_back(quality, k)
-        total += values
-        count[on_grid] += 1.0
-    return (total / count).astype(qualities.dtype)
+        region, view = _turned_view(quality, k)
+        total[region] += view  # added in place, without the zero-filled copy _read_back makes
+        count[region] += 1.0
+    return (total / count).astype(first.dtype)
 
 
-def average_turned_rotation(rotations: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
-    """(4, N, N, N) mean grasp orientation, in the unturned grid's frame and voxels, of
-    (4, 4, N, N, N) network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`.
+def average_turned_rotation(rotations: Sequence[np.ndarray], where: np.ndarray | None = None) -> np.ndarray:
+    """(4, N, N, N) mean grasp orientation, in the unturned grid's frame and voxels, of the
+    four (4, N, N, N) network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`.
 
     Each turn's quaternion is read at the turned grasp position and turned back about z. A
     quaternion and its negative are one rotation, and a grasp turned by π about its approach is
@@ -81,7 +91,7 @@ def average_turned_rotation(rotations: np.ndarray, where: np.ndarray | None = No
     reads: elsewhere the result is the unturned grid's prediction.
     """
     reference = rotations[0]
-    n = rotations.shape[-1]
+    n = reference.shape[-1]
     i, j, depth = np.nonzero(np.ones(reference.shape[1:], dtype=bool) if where is None else where)
     chosen_reference = reference[:, i, j, depth]
     total = chosen_reference.astype(np.float32, copy=True)
