@@ -164,7 +164,7 @@ class GraspPlanner:
         self._batcher = MicroBatcher(self._forward_batch, self.batch_window_ms / 1e3, options.max_batch)
         self.lanes = default_lanes(device) if options.lanes is None else max(1, options.lanes)
         self._lane_pool = (
-            ThreadPoolExecutor(self.lanes, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
+            ThreadPoolExecutor(self.lanes - 1, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
         )
 
     @classmethod
@@ -238,17 +238,22 @@ class GraspPlanner:
         assert self._network is not None
         lanes = min(len(grids), self.lanes)
         if lanes > 1 and self._lane_pool is not None:
-            parts = list(self._lane_pool.map(self._forward_tensors, np.array_split(grids, lanes)))
-            quality, rotation, width = (np.concatenate([part[k] for part in parts]) for k in range(3))
+            # The calling thread runs the first part itself: it is awake and its caches are
+            # warm, while each hand-off to an idle lane costs a wake-up.
+            first, *others = np.array_split(grids, lanes)
+            pending = [self._lane_pool.submit(self._forward_tensors, part) for part in others]
+            parts = [self._forward_tensors(first), *(future.result() for future in pending)]
         else:
-            quality, rotation, width = self._forward_tensors(grids)
-        if len(grids) == 1:
-            return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
-        # Copies, so that an output a session keeps does not hold on to the whole batch.
-        return [
-            NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
-            for b in range(len(grids))
-        ]
+            parts = [self._forward_tensors(grids)]
+        outputs = []
+        for quality, rotation, width in parts:
+            if len(quality) == 1:
+                outputs.append(NetworkOutput(quality[0, 0], rotation[0], width[0, 0]))
+                continue
+            # Copies, so that an output a session keeps does not hold on to the whole batch.
+            outputs += [NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
+                        for b in range(len(quality))]  # fmt: skip
+        return outputs
 
     def _forward_tensors(self, grids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Quality, rotation and width arrays of one forward pass over (B, N, N, N) grids."""

@@ -44,6 +44,13 @@ class Settings(BaseSettings):
         "unset: 2 ms on a GPU, 0 on a CPU",
     )
     max_batch: int = Field(default=32, ge=1, le=256, description="most grids in one forward pass")
+    lanes: int | None = Field(
+        default=None,
+        ge=1,
+        le=64,
+        description="threads that share the grids of one forward pass on a CPU (turned grids, concurrent "
+        "requests), each with the torch threads; unset: the usable cores over the torch threads",
+    )
     reuse_output: bool = Field(
         default=True,
         description="answer a grasp request on a session whose volume has not changed since the last one "

@@ -22,6 +22,7 @@ OPERATOR_VARIABLES = (
     "OMP_WAIT_POLICY",
     "OMP_NUM_THREADS",
     "VGN_TORCH_THREADS",
+    "VGN_LANES",
     "GOMP_SPINCOUNT",
     *MALLOC_VARIABLES,
 )
@@ -71,3 +72,10 @@ def test_a_plain_start_sets_openmp_before_torch_and_reports_it(random_checkpoint
     assert runtime["torch_threads"] == default_threads(runtime["usable_cores"])
     assert runtime["inference"] == "fast" and runtime["precision"] in ("bfloat16", "float32")
     assert runtime["malloc"]["set_by_service"] is ON_GLIBC
+
+
+def test_the_operator_s_lane_count_is_used_and_reported(random_checkpoint):
+    """``VGN_LANES`` overrides the lanes the service would choose (the cores over the torch threads)."""
+    with EmbeddedService(model=random_checkpoint, env={"VGN_API_KEY": "", "VGN_LANES": "3"}) as service:
+        runtime = httpx.get(f"{service.url}/model").json()["runtime"]
+    assert runtime["lanes"] == 3
