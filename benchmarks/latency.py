@@ -20,9 +20,10 @@ One run measures the p50 and p95 latency (milliseconds) of
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
-   (plain), and turn-averaged (``turn_average=true``; its ratio to the default, paired);
+   (turn-averaged, unless ``VGN_TURN_AVERAGE=false``), and the other way (``turn_average`` set
+   to the opposite; its ratio to the default, paired);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
-   so that each runs the network, by default and turn-averaged; and without new frames, when the
+   so that each runs the network, by default and the other way; and without new frames, when the
    service answers from the session's last network output;
 7. steadiness: the grasp request over HTTP again, on a second server started the same way;
 8. throughput of grasp requests over HTTP from 1, 8 and 32 concurrent sessions (each with its
@@ -136,16 +137,19 @@ FRAME_HTTP = "VGNClient.add_frame (raw f32)"
 FRAME_HTTP_PACED = "VGNClient.add_frame (raw f32), 33 ms after the last call"
 #: Idle time before each paced upload: a 30 Hz depth camera.
 CAMERA_PERIOD_S = 1 / 30
-GRASPS_HTTP = "VGNClient.grasps (service default: plain)"
-GRASPS_HTTP_TURNS = "VGNClient.grasps, turn_average=true"
+GRASPS_HTTP = "VGNClient.grasps (service default)"
 FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
 GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
-PLAN = "PlanningService.plan (default: plain)"
-PLAN_TURNS = "PlanningService.plan, turn_average=true"
+PLAN = "PlanningService.plan (service default)"
+
+
+def other_way(operation: str, default_turns: bool) -> str:
+    """The name of ``operation`` asked the other way than the service's default."""
+    return f"{operation.split(' (')[0]}, turn_average={'false' if default_turns else 'true'}"
 
 
 # Measurement -------------------------------------------------------------------------------
@@ -790,18 +794,21 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         )
         network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
-        turns_query = GraspQuery(threshold=THRESHOLD, turn_average=True)
-        plan_turns, _ = core_plan_operation(core, frames, turns_query, PLAN_TURNS)
+        default_turns = bool(runtime.get("turn_average"))
+        other_query = GraspQuery(threshold=THRESHOLD, turn_average=not default_turns)
+        plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, default_turns))
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
-        grasps_turns, _ = http_grasp_operation(client, frames, GRASPS_HTTP_TURNS, turn_average=True)
+        grasps_other, _ = http_grasp_operation(
+            client, frames, other_way(GRASPS_HTTP, default_turns), turn_average=not default_turns
+        )
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, plan_turns, grasps_http, grasps_turns, grasps_kept, grasps_again]
+            + [plan, plan_other, grasps_http, grasps_other, grasps_kept, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
@@ -816,8 +823,9 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
-    for default, turns in ((PLAN, PLAN_TURNS), (GRASPS_HTTP, GRASPS_HTTP_TURNS)):
-        row = find(rows, turns)
+    default_turns = bool(runtime.get("turn_average"))
+    for default in (PLAN, GRASPS_HTTP):
+        row = find(rows, other_way(default, default_turns))
         row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
