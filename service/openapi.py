@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 from pathlib import Path
 
 from service.app import create_app
@@ -18,9 +18,11 @@ def render() -> str:
     return json.dumps(document, indent=2, sort_keys=True) + "\n"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     """Write the document to the path given, or to the repository's ``openapi.json``."""
-    path = Path(sys.argv[1]) if len(sys.argv) > 1 else DEFAULT_PATH
+    parser = argparse.ArgumentParser(prog="python -m service.openapi", description=__doc__)
+    parser.add_argument("path", nargs="?", type=Path, default=DEFAULT_PATH, help="where to write it")
+    path = parser.parse_args(argv).path
     path.write_text(render())
     print(f"wrote {path}")
 
