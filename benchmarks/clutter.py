@@ -86,10 +86,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--turn-average",
         action=argparse.BooleanOptionalAction,
-        default=True,
-        help="VGN scores and orientations averaged over four quarter turns of the grid (default: on, as the "
-        "service answers requests that do not say; --no-turn-average for VGN's single pass); its rows are "
-        "labelled vgn+turns and results go to folders ending in -turns (the antipodal planner is unaffected)",
+        default=False,
+        help="VGN scores and orientations averaged over four quarter turns of the grid (default: off, as the "
+        "service answers requests that do not say); its rows are labelled vgn+turns and results go to folders "
+        "ending in -turns (the antipodal planner is unaffected)",
     )
     parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")

@@ -20,7 +20,7 @@ One run measures the p50 and p95 latency (milliseconds) of
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
-   (turn-averaged, unless ``VGN_TURN_AVERAGE=false``), and the other way (``turn_average`` set
+   (a single pass, unless ``VGN_TURN_AVERAGE=true``), and the other way (``turn_average`` set
    to the opposite; its ratio to the default, paired);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
    so that each runs the network, by default and the other way; and without new frames, when the

@@ -33,7 +33,7 @@ from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
 TURN_AVERAGE_HELP = (
     "score and orient grasps by the network's outputs averaged over four quarter turns of the grid, or not "
-    "(VGN only; default: the service's, on unless its operator turned it off)"
+    "(VGN only; default: the service's, off unless its operator turned it on)"
 )
 
 

@@ -264,10 +264,9 @@ class GraspQuery(_Model):
         default=None,
         description="vgn only: score each grasp by the network's quality averaged over the grid "
         "turned by 0, 90, 180 and 270 degrees about the workspace z axis (the turns VGN trains "
-        "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 1.8x "
-        "the time of a single pass on 2 CPU cores; widths stay those of the unturned grid; false: VGN's "
-        "single pass. Unset: the service's default (VGN_TURN_AVERAGE, on unless the operator turned it "
-        "off; /model runtime says)",
+        "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 2x the "
+        "time of a plain request on 2 CPU cores; widths stay those of the unturned grid. Unset: the "
+        "service's default (VGN_TURN_AVERAGE, off unless the operator turned it on; /model runtime says)",
     )
 
     @field_validator("crop_min", "crop_max", "approach", mode="before")

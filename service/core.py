@@ -68,7 +68,11 @@ class PlanningService:
         torch.set_num_threads(settings.torch_threads or configured_threads())
         tune_malloc()
         options = InferenceOptions(
-            settings.inference, settings.precision, settings.batch_window_ms, settings.max_batch, settings.lanes
+            settings.inference,
+            settings.precision,
+            settings.batch_window_ms,
+            settings.max_batch,
+            settings.lanes,
         )
         return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
 

@@ -133,11 +133,11 @@ def test_a_kept_output_serves_only_requests_with_the_same_averaging(core: Planni
     assert first_averaged != first_plain
     assert core.plan(session, plain).grasps == first_plain
     assert core.plan(session, averaged).grasps == first_averaged
-    assert core.plan(session, GraspQuery(threshold=0.0)).grasps == first_averaged, "the default is on"
+    assert core.plan(session, GraspQuery(threshold=0.0)).grasps == first_plain, "the default is off"
 
 
 def test_the_operator_chooses_the_default_and_requests_may_override_it(random_checkpoint):
-    core = PlanningService.from_settings(Settings(model=random_checkpoint, api_key=None, turn_average=False))
+    core = PlanningService.from_settings(Settings(model=random_checkpoint, api_key=None, turn_average=True))
     try:
         session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
         scene = BoxScene()
@@ -146,10 +146,10 @@ def test_the_operator_chooses_the_default_and_requests_may_override_it(random_ch
         default = core.plan(session, GraspQuery(threshold=0.0))
         plain = core.plan(session, GraspQuery(threshold=0.0, turn_average=False))
         averaged = core.plan(session, GraspQuery(threshold=0.0, turn_average=True))
-        assert default.grasps == plain.grasps != averaged.grasps
-        assert (default.turn_average, averaged.turn_average) == (False, True)
+        assert default.grasps == averaged.grasps != plain.grasps
+        assert (default.turn_average, plain.turn_average) == (True, False)
         assert core.plan(session, GraspQuery(planner="antipodal")).turn_average is None
-        assert core.model_info().runtime["turn_average"] is False
+        assert core.model_info().runtime["turn_average"] is True
     finally:
         core.close()
 
@@ -168,8 +168,8 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     assert averaged.grasps and averaged.grasps != plain.grasps
     assert (plain.turn_average, averaged.turn_average) == (False, True)
     default = vgn.grasps(session, threshold=0.0)
-    assert default.grasps == averaged.grasps and default.turn_average is True, "on unless the operator says"
-    assert vgn.model().runtime["turn_average"] is True
+    assert default.grasps == plain.grasps and default.turn_average is False, "off unless the operator says"
+    assert vgn.model().runtime["turn_average"] is False
     bad = httpx.get(f"{vgn.url}/sessions/{session}/grasps", params={"turn_average": "maybe"})
     assert bad.status_code == 422 and "turn_average" in bad.json()["message"]
 
@@ -187,7 +187,7 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
                 expected = core.plan(local, GraspQuery(threshold=0.0, turn_average=turn_average))
                 answer = rpc.grasps(local, threshold=0.0, turn_average=turn_average)
                 assert answer.grasps == expected.grasps
-                assert answer.turn_average is (turn_average is not False)
+                assert answer.turn_average is (turn_average is True)
     finally:
         server.stop(None)
 

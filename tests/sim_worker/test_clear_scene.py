@@ -173,9 +173,9 @@ def test_clear_scene_records_its_grasp_options(server, tmp_path: Path, option: s
 
 
 def test_clear_scene_records_the_services_turn_averaging_default_or_the_choice(server, tmp_path: Path):
-    """Without the option the service's default applies (on here) and is recorded as such."""
-    for options, averaged in (((), True), (("--no-turn-average",), False)):
-        results = tmp_path / ("default" if not options else "plain")
+    """Without the option the service's default applies (off here) and is recorded as such."""
+    for options, averaged in (((), False), (("--turn-average",), True)):
+        results = tmp_path / ("default" if not options else "turns")
         run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
                           *options, "--results", str(results))  # fmt: skip
         assert run.returncode == 0, run.stderr
@@ -204,15 +204,10 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
         == "antipodal+clearance"
     )
     default = parse_args(["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random"])
-    assert [folder.name for *_, folder in combinations(default)] == ["vgn-random-pile-5-turns"], (
-        "on, as the service"
+    assert [folder.name for *_, folder in combinations(default)] == ["vgn-random-pile-5"], (
+        "off, as the service"
     )
-    assert scenario_config(default, "vgn", "random", "pile-5").turn_average is True
-    plain = parse_args(
-        ["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random", "--no-turn-average"]
-    )
-    assert [folder.name for *_, folder in combinations(plain)] == ["vgn-random-pile-5"]
-    assert scenario_config(plain, "vgn", "random", "pile-5").turn_average is False
+    assert scenario_config(default, "vgn", "random", "pile-5").turn_average is False
 
 
 def test_configs_without_the_clearance_check_keep_their_recorded_form():
