@@ -823,7 +823,6 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         runtime = {**(model.runtime or {}), "device": model.device}
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
-    default_turns = bool(runtime.get("turn_average"))
     for default in (PLAN, GRASPS_HTTP):
         row = find(rows, other_way(default, default_turns))
         row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"

@@ -78,10 +78,15 @@ def view_data(
     return compressed(scene.encode(), "application/json", request)
 
 
+def accepts_gzip(request: Request) -> bool:
+    """Whether the client said it takes gzip-compressed bodies."""
+    return "gzip" in request.headers.get("accept-encoding", "")
+
+
 def compressed(body: bytes, media_type: str, request: Request) -> Response:
     """``body``, gzip-compressed (fast level) when the client accepts it: the surface points make
     a page or its data 1-2 MB of JSON, which compresses about fourfold."""
-    if "gzip" not in request.headers.get("accept-encoding", ""):
+    if not accepts_gzip(request):
         return Response(body, media_type=media_type, headers={"Vary": "Accept-Encoding"})
     packed = gzip.compress(body, compresslevel=GZIP_LEVEL, mtime=0)
     headers = {"Content-Encoding": "gzip", "Vary": "Accept-Encoding"}
@@ -103,6 +108,6 @@ def plotly_script(tag: str, request: Request) -> Response:
     if request.headers.get("if-none-match") == headers["ETag"]:
         return Response(status_code=304, headers=headers)
     media_type = "text/javascript; charset=utf-8"
-    if "gzip" in request.headers.get("accept-encoding", ""):
+    if accepts_gzip(request):
         return Response(plotly_gzip(), media_type=media_type, headers={**headers, "Content-Encoding": "gzip"})
     return Response(plotly_bytes(), media_type=media_type, headers=headers)

@@ -54,17 +54,6 @@ def _turned_view(field: np.ndarray, quarter_turns: int) -> tuple[tuple[slice, sl
     return (rest, every), field[:, reverse].swapaxes(0, 1)  # values[i, j] = field[j, N - i], i >= 1
 
 
-def _read_back(field: np.ndarray, quarter_turns: int) -> tuple[np.ndarray, np.ndarray]:
-    """An (N, N, N) output of the grid turned by ``quarter_turns``, read at each unturned grasp
-    position's turned place; zero where the turn took the position off the grid, which the
-    returned (N, N) mask marks False."""
-    region, view = _turned_view(field, quarter_turns)
-    values = np.zeros_like(field)
-    on_grid = np.zeros(field.shape[:2], dtype=bool)
-    values[region], on_grid[region] = view, True
-    return values, on_grid
-
-
 def average_turned_quality(qualities: Sequence[np.ndarray]) -> np.ndarray:
     """(N, N, N) mean quality, in the unturned grid's voxels, of the four (N, N, N) network
     qualities on :func:`turned_grids` (each voxel averages the turns that keep it on the grid)."""
@@ -73,7 +62,7 @@ def average_turned_quality(qualities: Sequence[np.ndarray]) -> np.ndarray:
     count = np.zeros(first.shape[:2] + (1,), dtype=np.float64)
     for k, quality in zip(TURNS, qualities, strict=True):
         region, view = _turned_view(quality, k)
-        total[region] += view  # added in place, without the zero-filled copy _read_back makes
+        total[region] += view  # added in place, without a zero-filled copy of each turn
         count[region] += 1.0
     return (total / count).astype(first.dtype)
 

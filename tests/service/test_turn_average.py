@@ -25,7 +25,7 @@ from service.vgn.batching import MicroBatcher
 from service.vgn.detection import grasp_region
 from service.vgn.turns import (
     TURNS,
-    _read_back,
+    _turned_view,
     average_turned_quality,
     average_turned_rotation,
     turned_grids,
@@ -223,6 +223,16 @@ def test_orientations_that_turn_with_the_scene_average_back_to_the_unturned_ones
         for axis in range(4):
             turned[k, axis][to_i[on_grid], to_j[on_grid]] = rotated[..., axis].numpy()[on_grid]
     np.testing.assert_allclose(average_turned_rotation(turned), reference, atol=1e-5)
+
+
+def _read_back(field: np.ndarray, quarter_turns: int) -> tuple[np.ndarray, np.ndarray]:
+    """A turned output read at each unturned grasp position, zero off the grid, and the (N, N)
+    mask of the positions the turn keeps: what the averages add up, through ``_turned_view``."""
+    region, view = _turned_view(field, quarter_turns)
+    values = np.zeros_like(field)
+    on_grid = np.zeros(field.shape[:2], dtype=bool)
+    values[region], on_grid[region] = view, True
+    return values, on_grid
 
 
 @pytest.mark.parametrize("quarter_turns", [0, 1, 2, 3, 5])
