@@ -6,6 +6,8 @@ poses are 4×4 homogeneous matrices mapping points from a child frame into a par
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -13,6 +15,13 @@ from scipy.spatial.transform import Rotation
 UNIT_QUATERNION_TOLERANCE = 1e-3
 #: How far ``RᵀR`` may stray from the identity before a matrix counts as non-rigid.
 ORTHONORMAL_TOLERANCE = 1e-4
+#: The last row of every homogeneous rigid transform.
+_HOMOGENEOUS_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+#: scipy >= 1.17 can skip re-orthonormalising a matrix the caller has checked: for a single
+#: matrix that is ~22 instead of ~90 us, which every frame upload pays for its camera pose.
+_CHECKED_MATRIX = (
+    {"assume_valid": True} if "assume_valid" in inspect.signature(Rotation.from_matrix).parameters else {}
+)
 
 
 def check_unit_quaternion(quaternion: np.ndarray) -> None:
@@ -33,9 +42,9 @@ def check_rigid_matrix(matrix: np.ndarray) -> None:
     m = np.asarray(matrix, dtype=np.float64)
     if m.shape != (4, 4):
         raise ValueError(f"pose matrix must be 4x4, got shape {m.shape}")
-    if not np.all(np.isfinite(m)):
+    if not np.isfinite(m).all():
         raise ValueError("pose matrix contains NaN or inf")
-    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+    if np.abs(m[3] - _HOMOGENEOUS_ROW).max() > 1e-9:
         raise ValueError(f"pose matrix last row must be [0, 0, 0, 1], got {m[3].tolist()}")
     rotation = m[:3, :3]
     error = float(np.abs(rotation.T @ rotation - np.eye(3)).max())
@@ -57,6 +66,13 @@ def pose_from_matrix(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(position, quaternion [x, y, z, w])`` of a 4×4 rigid transform."""
     m = np.asarray(matrix, dtype=np.float64)
     return m[:3, 3].copy(), Rotation.from_matrix(m[:3, :3]).as_quat()
+
+
+def pose_from_rigid_matrix(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``pose_from_matrix`` for a matrix that passed ``check_rigid_matrix``: its rotation is
+    orthonormal within ``ORTHONORMAL_TOLERANCE``, so the quaternion is read off directly."""
+    m = np.asarray(matrix, dtype=np.float64)
+    return m[:3, 3].copy(), Rotation.from_matrix(m[:3, :3], **_CHECKED_MATRIX).as_quat()
 
 
 def invert(matrix: np.ndarray) -> np.ndarray:

@@ -308,3 +308,53 @@ def test_each_typed_error_matches_its_server_answer(vgn: VGNClient, server: Embe
     for error in (bad, unsupported, invalid, conflict, too_large, no_model):
         assert isinstance(error.value, VGNError) and error.value.detail, "each carries the service's reason"
     assert vgn.session(session).frame_count == 0, "no refused frame was fused"
+
+
+# Where an upload is fused ---------------------------------------------------------------------
+
+
+def metric_values(vgn: VGNClient, name: str) -> dict[str, float]:
+    """``name``'s samples from ``/metrics``, keyed by their label text ("" when unlabelled)."""
+    values = {}
+    for line in vgn.metrics().splitlines():
+        if line.startswith(name + "{") or line.startswith(name + " "):
+            key, value = line.rsplit(" ", 1)
+            values[key[len(name) :]] = float(value)
+    return values
+
+
+def fused(vgn: VGNClient) -> tuple[float, float]:
+    """Frames fused so far (on the event loop, in a worker thread)."""
+    values = metric_values(vgn, "vgn_http_frames_fused_total")
+    return values.get('{where="loop"}', 0.0), values.get('{where="thread"}', 0.0)
+
+
+def test_a_lone_upload_is_fused_on_the_loop_and_one_beside_a_plan_in_a_thread(
+    vgn: VGNClient, server: EmbeddedService
+):
+    """The only request in flight fuses its frame on the event loop; an upload while another
+    request is served goes to a worker thread, so the loop keeps serving that one."""
+    session = vgn.create_session(intrinsics=INTRINSICS).session_id
+    loop_before, thread_before = fused(vgn)
+    vgn.add_frame(session, DEPTHS[0], POSES[0])
+    assert fused(vgn) == (loop_before + 1, thread_before)
+
+    planned = vgn.create_session(intrinsics=INTRINSICS).session_id
+    for depth, pose in zip(DEPTHS, POSES, strict=True):
+        vgn.add_frame(planned, depth, pose)
+    for _ in range(5):  # the plan must still be in flight when the upload is served
+        with VGNClient(server.url) as planner:
+            planning = threading.Thread(target=lambda: planner.grasps(planned, planner="antipodal"))
+            planning.start()
+            while planning.is_alive() and metric_values(vgn, "vgn_http_requests_in_flight")[""] < 2:
+                time.sleep(0.005)  # the metrics request itself is the first in flight
+            loop_before, thread_before = fused(vgn)
+            vgn.add_frame(session, DEPTHS[1], POSES[1])
+            overlapped = planning.is_alive()
+            planning.join()
+        if overlapped:
+            assert fused(vgn) == (loop_before, thread_before + 1)
+            break
+    else:
+        pytest.fail("the antipodal plan never outlasted an upload")
+    assert vgn.session(session).frame_count == 2
