@@ -35,19 +35,6 @@ class ServiceMetrics:
             buckets=LATENCY_BUCKETS,
             registry=self.registry,
         )
-        #: HTTP requests between arrival and their last byte sent; only the event loop's thread
-        #: changes it (``RequestMetrics``), so a plain int with no lock.
-        self.in_flight = 0
-        Gauge(
-            "vgn_http_requests_in_flight", "HTTP requests being served", registry=self.registry
-        ).set_function(lambda: self.in_flight)
-        self.frames_fused = Counter(
-            "vgn_http_frames_fused_total",
-            "frames uploaded over HTTP, by where they were fused: on the event loop (the only request "
-            "in flight) or in a worker thread",
-            ["where"],
-            registry=self.registry,
-        )
         self.planning = Histogram(
             "vgn_planning_seconds",
             "grid read-out + network + detection time",
@@ -78,7 +65,6 @@ class RequestMetrics:
             return
         started = time.perf_counter()
         status = 500
-        self.metrics.in_flight += 1
 
         async def recording_send(message: Message) -> None:
             nonlocal status
@@ -89,7 +75,6 @@ class RequestMetrics:
         try:
             await self.app(scope, receive, recording_send)
         finally:
-            self.metrics.in_flight -= 1
             route = scope.get("route")
             template = getattr(route, "path", "unmatched")
             method = Request(scope).method

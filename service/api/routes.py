@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 import io
 import secrets
 from typing import Annotated
@@ -239,15 +238,8 @@ async def add_frame(service: Core, session_id: str, request: Request) -> FrameRe
         meta = FrameMeta.model_validate_json(meta_text)
     except ValidationError as error:
         return validation_response(list(error.errors()), prefix=("meta",))
-    fuse = functools.partial(service.add_encoded_frame, session_id, data, content_type, meta)
-    counters = metrics(request)
-    # A lone upload is fused on the event loop: handing its ~1.5 ms of decoding and Open3D to a
-    # worker thread and waking the loop again cost ~0.6 ms of a ~5 ms upload (2-core VM). With
-    # any other request in flight it goes to a thread, so the loop keeps serving the others.
-    alone = counters.in_flight <= 1
-    result = fuse() if alone else await run_in_threadpool(fuse)
-    counters.frames_fused.labels("loop" if alone else "thread").inc()
-    counters.integration.observe(result.integration_ms / 1e3)
+    result = await run_in_threadpool(service.add_encoded_frame, session_id, data, content_type, meta)
+    metrics(request).integration.observe(result.integration_ms / 1e3)
     return result
 
 

@@ -1,0 +1,41 @@
+"""A checked pose matrix's quaternion, read off without re-orthonormalising, is the rotation's."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from client.geometry import ORTHONORMAL_TOLERANCE, check_rigid_matrix, pose_from_matrix, pose_from_rigid_matrix
+from client.schemas import Pose
+
+
+def rigid(rotation: np.ndarray, position: np.ndarray) -> np.ndarray:
+    matrix = np.eye(4)
+    matrix[:3, :3], matrix[:3, 3] = rotation, position
+    return matrix
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    return float((Rotation.from_quat(a).inv() * Rotation.from_quat(b)).magnitude())
+
+
+def test_exact_rotations_give_the_same_pose_both_ways():
+    rng = np.random.default_rng(3)
+    for rotation in Rotation.random(50, random_state=4).as_matrix():
+        matrix = rigid(rotation, rng.uniform(-1, 1, 3))
+        position, quaternion = pose_from_rigid_matrix(matrix)
+        reference_position, reference_quaternion = pose_from_matrix(matrix)
+        assert np.array_equal(position, reference_position)
+        assert angle_between(quaternion, reference_quaternion) < 1e-9
+
+
+def test_a_rotation_just_inside_the_tolerance_gives_a_unit_quaternion_near_the_nearest_rotation():
+    rng = np.random.default_rng(5)
+    for rotation in Rotation.random(50, random_state=6).as_matrix():
+        matrix = rigid(rotation + rng.normal(0, ORTHONORMAL_TOLERANCE / 8, (3, 3)), np.zeros(3))
+        check_rigid_matrix(matrix)  # still counts as rigid
+        _, quaternion = pose_from_rigid_matrix(matrix)
+        assert abs(np.linalg.norm(quaternion) - 1) < 1e-12
+        assert angle_between(quaternion, pose_from_matrix(matrix)[1]) < ORTHONORMAL_TOLERANCE
+        pose = Pose.from_matrix(matrix)  # and the schema takes it
+        assert angle_between(np.asarray(pose.orientation), quaternion) < 1e-12
