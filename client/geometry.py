@@ -17,8 +17,8 @@ UNIT_QUATERNION_TOLERANCE = 1e-3
 ORTHONORMAL_TOLERANCE = 1e-4
 #: The last row of every homogeneous rigid transform.
 _HOMOGENEOUS_ROW = np.array([0.0, 0.0, 0.0, 1.0])
-#: scipy >= 1.17 can skip re-orthonormalising a matrix the caller has checked: for a single
-#: matrix that is ~22 instead of ~90 us, which every frame upload pays for its camera pose.
+#: Newer scipy (1.17.1 here) can skip re-orthonormalising a matrix the caller has checked: for
+#: a single matrix ~22 instead of ~90 us, which every frame upload pays for its camera pose.
 _CHECKED_MATRIX = (
     {"assume_valid": True} if "assume_valid" in inspect.signature(Rotation.from_matrix).parameters else {}
 )
@@ -62,17 +62,13 @@ def matrix_from_pose(position: np.ndarray, quaternion: np.ndarray) -> np.ndarray
     return matrix
 
 
-def pose_from_matrix(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(position, quaternion [x, y, z, w])`` of a 4×4 rigid transform."""
+def pose_from_matrix(matrix: np.ndarray, checked: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``(position, quaternion [x, y, z, w])`` of a 4×4 rigid transform. ``checked``: the matrix
+    passed ``check_rigid_matrix`` (orthonormal within ``ORTHONORMAL_TOLERANCE``), so the
+    quaternion is read off without re-orthonormalising the rotation first."""
     m = np.asarray(matrix, dtype=np.float64)
-    return m[:3, 3].copy(), Rotation.from_matrix(m[:3, :3]).as_quat()
-
-
-def pose_from_rigid_matrix(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``pose_from_matrix`` for a matrix that passed ``check_rigid_matrix``: its rotation is
-    orthonormal within ``ORTHONORMAL_TOLERANCE``, so the quaternion is read off directly."""
-    m = np.asarray(matrix, dtype=np.float64)
-    return m[:3, 3].copy(), Rotation.from_matrix(m[:3, :3], **_CHECKED_MATRIX).as_quat()
+    options = _CHECKED_MATRIX if checked else {}
+    return m[:3, 3].copy(), Rotation.from_matrix(m[:3, :3], **options).as_quat()
 
 
 def invert(matrix: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ from client.geometry import (
     UNIT_QUATERNION_TOLERANCE,
     check_rigid_matrix,
     check_unit_quaternion,
-    pose_from_rigid_matrix,
+    pose_from_matrix,
 )
 
 Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
@@ -65,7 +65,7 @@ class Pose(_Model):
             except (TypeError, ValueError) as error:
                 raise ValueError(f"pose matrix must be a 4x4 array of numbers: {error}") from None
             check_rigid_matrix(matrix)
-            position, quaternion = pose_from_rigid_matrix(matrix)
+            position, quaternion = pose_from_matrix(matrix, checked=True)
             return {"position": position.tolist(), "orientation": quaternion.tolist()}
         return data
 

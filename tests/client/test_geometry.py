@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.geometry import ORTHONORMAL_TOLERANCE, check_rigid_matrix, pose_from_matrix, pose_from_rigid_matrix
+from client.geometry import ORTHONORMAL_TOLERANCE, check_rigid_matrix, pose_from_matrix
 from client.schemas import Pose
 
 
@@ -23,7 +23,7 @@ def test_exact_rotations_give_the_same_pose_both_ways():
     rng = np.random.default_rng(3)
     for rotation in Rotation.random(50, random_state=4).as_matrix():
         matrix = rigid(rotation, rng.uniform(-1, 1, 3))
-        position, quaternion = pose_from_rigid_matrix(matrix)
+        position, quaternion = pose_from_matrix(matrix, checked=True)
         reference_position, reference_quaternion = pose_from_matrix(matrix)
         assert np.array_equal(position, reference_position)
         assert angle_between(quaternion, reference_quaternion) < 1e-9
@@ -34,7 +34,7 @@ def test_a_rotation_just_inside_the_tolerance_gives_a_unit_quaternion_near_the_n
     for rotation in Rotation.random(50, random_state=6).as_matrix():
         matrix = rigid(rotation + rng.normal(0, ORTHONORMAL_TOLERANCE / 8, (3, 3)), np.zeros(3))
         check_rigid_matrix(matrix)  # still counts as rigid
-        _, quaternion = pose_from_rigid_matrix(matrix)
+        _, quaternion = pose_from_matrix(matrix, checked=True)
         assert abs(np.linalg.norm(quaternion) - 1) < 1e-12
         assert angle_between(quaternion, pose_from_matrix(matrix)[1]) < ORTHONORMAL_TOLERANCE
         pose = Pose.from_matrix(matrix)  # and the schema takes it
