@@ -38,5 +38,5 @@ fi
 # torch is pinned (==2.13.0) in pyproject.toml. Where pip is configured with a local CPU wheel
 # (find-links, as on our development machines) it takes that; elsewhere add
 # PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu to get the CPU build, not CUDA.
-# ray: the --ray tests run in CI too.
-python3 -m pip install --quiet --disable-pip-version-check -e ".[all,dev,ray]"
+# ray and runtimes: the --ray tests and the runtime comparison's tests run in CI too.
+python3 -m pip install --quiet --disable-pip-version-check -e ".[all,dev,ray,runtimes]"

@@ -13,7 +13,9 @@ One run measures the p50 and p95 latency (milliseconds) of
    ``VGNClient.add_frame`` (the bare image as the body, meta in ``X-Frame-Meta``): raw
    float32, and a uint16 millimetre array sent as a 16-bit PNG; and the same float32 frame
    as a multipart upload, the other form the service accepts; and the raw float32 upload
-   33 ms after the previous call (a 30 Hz camera: both processes idle in between);
+   33 ms after the previous call (a 30 Hz camera: both processes idle in between); and, as
+   the floor under the client library, the same request from the standard library's
+   ``http.client`` with its body and meta header built beforehand;
 4. running VGN *directly* (the baseline): the naive float32 eager forward pass of the network
    as trained (``torch.inference_mode``) on a (1, 1, 40, 40, 40) grid fused from 6 views,
    then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
@@ -73,6 +75,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import http.client
 import json
 import os
 import platform
@@ -81,6 +84,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.parse
 import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -94,7 +98,7 @@ import open3d as o3d
 import torch
 
 from client.embedded import EmbeddedService
-from client.http import VGNClient, encode_depth
+from client.http import FRAME_META_HEADER, VGNClient, encode_depth
 from client.schemas import FrameMeta, GraspQuery, Pose, SessionCreate
 from service.core import PlanningService
 from service.planner import resolve_device, resolve_precision
@@ -135,6 +139,7 @@ PNG_MEDIA_TYPE = "image/png"
 
 FRAME_HTTP = "VGNClient.add_frame (raw f32)"
 FRAME_HTTP_PACED = "VGNClient.add_frame (raw f32), 33 ms after the last call"
+FRAME_HTTP_BARE = "bare HTTP upload (http.client, body and meta prebuilt)"
 #: Idle time before each paced upload: a 30 Hz depth camera.
 CAMERA_PERIOD_S = 1 / 30
 GRASPS_HTTP = "VGNClient.grasps (service default)"
@@ -466,6 +471,20 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
         }
         multipart.post(f"/sessions/{multipart_id}/frames", files=files).raise_for_status()
 
+    # The floor under the client library: the same bytes on the wire (the body and the meta
+    # header VGNClient would send), from the standard library's client with nothing to build.
+    url = urllib.parse.urlsplit(client.url)
+    bare = http.client.HTTPConnection(url.hostname or "127.0.0.1", url.port, timeout=60)
+    bare_id = client.create_session(intrinsics=INTRINSICS).session_id
+
+    def bare_frame(k: int) -> None:
+        headers = {"Content-Type": RAW_MEDIA_TYPE, FRAME_META_HEADER: metas[k % n]}
+        bare.request("POST", f"/sessions/{bare_id}/frames", body=frames.raw[k % n], headers=headers)
+        response = bare.getresponse()
+        body = response.read()
+        if response.status != 200:
+            raise RuntimeError(f"bare upload answered {response.status}: {body[:200]!r}")
+
     def png_frame(k: int) -> None:
         client.add_frame(
             png_id,
@@ -480,6 +499,7 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
         # A camera streaming at 30 Hz leaves both processes idle between frames: caches and
         # clocks go cold, which a tight loop never shows (and the interleaved schedule only partly).
         Operation(FRAME_HTTP_PACED, group, paced_frame, "", lambda k: time.sleep(CAMERA_PERIOD_S)),
+        Operation(FRAME_HTTP_BARE, group, bare_frame, "baseline"),
         Operation("multipart upload (raw f32 part, httpx)", group, multipart_frame),
         Operation("VGNClient.add_frame (PNG16 from uint16 mm)", group, png_frame),
     ]
@@ -826,6 +846,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
     for default in (PLAN, GRASPS_HTTP):
         row = find(rows, other_way(default, default_turns))
         row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"
+    bare = find(rows, FRAME_HTTP_BARE).p50
+    find(rows, FRAME_HTTP).note += f" ({find(rows, FRAME_HTTP).p50 / bare:.2f}x the bare upload)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
     return Results(rows, grasps, concurrency, runtime)
 

@@ -141,8 +141,9 @@ class FastVGN(nn.Module):
         ``dtype`` is the compute precision (outputs stay float32)."""
         return cls(network.eval(), dtype).eval()
 
-    def forward(self, grid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """What ``VGN.forward`` returns for ``grid``, as float32, computed at ``dtype``."""
+    def head_logits(self, grid: torch.Tensor) -> torch.Tensor:
+        """The fused heads before their activations, float32, (B, 6·8, N/2, N/2, N/2): channel
+        ``c * 8 + parity`` of quality (c = 0), rotation (1-4) and width (5), not yet interleaved."""
         x = space_to_depth(grid.to(self.dtype))  # encoder.conv1 reads the parity channels
         for index, (stride, padding) in enumerate(self._strides):
             weight, bias = getattr(self, f"plain{index}_w"), getattr(self, f"plain{index}_b")
@@ -152,7 +153,11 @@ class FastVGN(nn.Module):
         for index in range(2):
             weight, bias = getattr(self, f"folded{index}_w"), getattr(self, f"folded{index}_b")
             x = pixel_shuffle_3d(F.relu(F.conv3d(x, weight, bias, padding=1)))
-        heads = F.conv3d(x, self.folded2_w, self.folded2_b, padding=1).float()
+        return F.conv3d(x, self.folded2_w, self.folded2_b, padding=1).float()
+
+    def forward(self, grid: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """What ``VGN.forward`` returns for ``grid``, as float32, computed at ``dtype``."""
+        heads = self.head_logits(grid)
         # The activations work per voxel, so they run in place on the contiguous parity groups,
         # and one pass then interleaves the parities (a copy per step, as torch.cat and a
         # reshaped shuffle made, cost as much as the last convolution).

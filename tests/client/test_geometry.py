@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from client.geometry import ORTHONORMAL_TOLERANCE, check_rigid_matrix, pose_from_matrix
@@ -39,3 +40,29 @@ def test_a_rotation_just_inside_the_tolerance_gives_a_unit_quaternion_near_the_n
         assert angle_between(quaternion, pose_from_matrix(matrix)[1]) < ORTHONORMAL_TOLERANCE
         pose = Pose.from_matrix(matrix)  # and the schema takes it
         assert angle_between(np.asarray(pose.orientation), quaternion) < 1e-12
+
+
+def test_pose_from_matrix_builds_what_validating_the_matrix_builds():
+    rng = np.random.default_rng(7)
+    for rotation in Rotation.random(20, random_state=8).as_matrix():
+        matrix = rigid(rotation, rng.uniform(-1, 1, 3))
+        built = Pose.from_matrix(matrix)
+        assert built == Pose.model_validate({"matrix": matrix.tolist()})
+        assert Pose.model_validate_json(built.model_dump_json()) == built  # valid on the wire too
+
+
+def test_pose_from_matrix_refuses_what_validation_refuses():
+    reflection = rigid(np.diag([1.0, 1.0, -1.0]), np.zeros(3))
+    sheared = rigid(np.array([[1.0, 0.1, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))
+    infinite = rigid(np.eye(3), np.array([0.0, np.inf, 0.0]))
+    for bad, message in [
+        (np.eye(3), "must be 4x4"),
+        (reflection, "reflection"),
+        (sheared, "not orthonormal"),
+        (infinite, "NaN or inf"),
+        ([["a"] * 4] * 4, "4x4 array of numbers"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            Pose.from_matrix(bad)
+        with pytest.raises(ValueError, match=message):
+            Pose.model_validate({"matrix": bad.tolist() if isinstance(bad, np.ndarray) else bad})
