@@ -17,7 +17,7 @@ from pathlib import Path
 
 import httpx
 
-from client.lifetime import preexec_for_child
+from client.lifetime import ending_with_this_process
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -75,12 +75,11 @@ class EmbeddedService:
             "--log-level",
             "warning",
         ]
-        # The service ends with this process, even one killed with SIGKILL (preexec_for_child).
+        # The service ends with this process, even one killed with SIGKILL (ending_with_this_process).
         # A file, not a pipe: a pipe nobody reads would block a chatty child.
         self._log = open(self._log_path, "a+b") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
-        self._process = subprocess.Popen(
-            command, env=self._env, stdout=self._log, stderr=self._log, preexec_fn=preexec_for_child()
-        )
+        env = ending_with_this_process(self._env)
+        self._process = subprocess.Popen(command, env=env, stdout=self._log, stderr=self._log)
         try:
             self._wait_until_up()
         except BaseException:

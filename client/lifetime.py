@@ -13,29 +13,50 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Callable
 
 _PR_SET_PDEATHSIG = 1
 # Loaded here, not in the child: a forked child must not import or load libraries.
 _libc = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
 
 
-def end_with_parent(sig: int = signal.SIGTERM) -> None:
+#: Names, in a child's environment, the process the child should end with (its pid).
+PARENT_VARIABLE = "VGN_END_WITH_PARENT"
+
+
+def end_with_parent(sig: int = signal.SIGTERM, parent: int | None = None) -> None:
     """Ask the kernel to send ``sig`` to this process when its parent dies. Call it in the
-    child: first thing in a worker, or through ``preexec_for_child``."""
+    child, first thing. ``parent``: the pid the parent had when it started this process; if
+    the parent is already another one (the first died and this process was re-parented), the
+    signal comes at once."""
     if _libc is None:
         return
-    parent = os.getppid()
+    expected = os.getppid() if parent is None else parent
     if _libc.prctl(_PR_SET_PDEATHSIG, sig, 0, 0, 0) != 0:
         return  # not fatal: the child still works, it merely may outlive a killed parent
-    if os.getppid() != parent:  # the parent died before the request took effect
+    if os.getppid() != expected:  # the parent died before the request took effect
         os.kill(os.getpid(), sig)
 
 
-def preexec_for_child() -> Callable[[], None] | None:
-    """``Popen(preexec_fn=...)`` making the child end with this process, or None where that is
-    not possible. The kernel watches the thread that forks, so only the main thread (which
-    lives as long as the process) asks for it."""
+def ending_with_this_process(env: dict[str, str]) -> dict[str, str]:
+    """``env`` for a child that should end with this process, however this process ends; the
+    child calls :func:`end_with_parent_if_asked` (importing ``service`` does).
+
+    The child asks for it after ``exec``, not through ``Popen(preexec_fn=...)``: a
+    ``preexec_fn`` makes Python ``fork`` instead of ``vfork``, and a fork runs every library's
+    fork handlers in the child. gRPC's (grpcio 1.80 and later) restart its poller thread
+    there, which can abort the child before it runs anything when this process uses gRPC.
+    The kernel watches the thread that forks, so only the main thread (which lives as long
+    as the process) asks for it.
+    """
     if _libc is None or threading.current_thread() is not threading.main_thread():
-        return None
-    return end_with_parent
+        return env
+    return {**env, PARENT_VARIABLE: str(os.getpid())}
+
+
+def end_with_parent_if_asked(environ: dict[str, str] | os._Environ = os.environ) -> None:
+    """In a child started with :func:`ending_with_this_process`: end with that parent. The
+    variable is removed, so that this process's own children do not inherit a parent that
+    is not theirs."""
+    value = environ.pop(PARENT_VARIABLE, "")
+    if value.isdigit():
+        end_with_parent(parent=int(value))

@@ -22,6 +22,7 @@ import pytest
 import torch
 
 from tests.helpers.datasets import make_dataset
+from tests.helpers.processes import wait_until_gone
 from vgn_data.files import CRASH_VARIABLE
 
 KILLED = -signal.SIGKILL
@@ -55,14 +56,6 @@ def children_of(pid: int) -> set[int]:
     return found
 
 
-def alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 def kill_when(process: subprocess.Popen, ready, timeout: float = 300.0) -> set[int]:
     """SIGKILL ``process`` as soon as ``ready()`` holds; returns the children it had then."""
     deadline = time.monotonic() + timeout
@@ -80,10 +73,9 @@ def kill_when(process: subprocess.Popen, ready, timeout: float = 300.0) -> set[i
 
 def assert_no_orphans(pids: set[int], timeout: float = 30.0) -> None:
     """A killed command's workers and embedded service end with it instead of working on."""
-    deadline = time.monotonic() + timeout
-    while any(alive(pid) for pid in pids) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    survivors = {pid: Path(f"/proc/{pid}/cmdline").read_bytes()[:120] for pid in pids if alive(pid)}
+    survivors = {
+        pid: Path(f"/proc/{pid}/cmdline").read_bytes()[:120] for pid in wait_until_gone(pids, timeout)
+    }
     for pid in survivors:
         os.kill(pid, signal.SIGKILL)
     assert not survivors, f"processes outlived the killed command: {survivors}"
