@@ -49,7 +49,7 @@ def ending_with_this_process(env: dict[str, str]) -> dict[str, str]:
     as the process) asks for it.
     """
     if _libc is None or threading.current_thread() is not threading.main_thread():
-        return env
+        return {name: value for name, value in env.items() if name != PARENT_VARIABLE}  # none inherited
     return {**env, PARENT_VARIABLE: str(os.getpid())}
 
 

@@ -63,7 +63,8 @@ def test_only_the_main_thread_asks():
     assert ending_with_this_process(env) == {"A": "1", PARENT_VARIABLE: str(os.getpid())}
     assert env == {"A": "1"}, "the caller's mapping is left as it was"
     from_thread = []
-    thread = threading.Thread(target=lambda: from_thread.append(ending_with_this_process(env)))
+    inherited = {**env, PARENT_VARIABLE: "12345"}  # a stale one must not reach the child either
+    thread = threading.Thread(target=lambda: from_thread.append(ending_with_this_process(inherited)))
     thread.start()
     thread.join()
     assert from_thread == [{"A": "1"}]
