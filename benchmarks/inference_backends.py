@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
 import tempfile
 import time
@@ -43,10 +42,11 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from benchmarks.latency import Measurement, Operation, run_interleaved
 from service.planner import native_bf16
 from service.runtime import configured_threads
 from service.settings import PACKAGED_MODEL
-from service.vgn.agreement import Tolerance, disagreements
+from service.vgn.agreement import Tolerance, disagreements, network_outputs, voxelwise_disagreements
 from service.vgn.checkpoint import load_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import HEAD_CHANNELS, NORM_EPS, FastVGN, pixel_shuffle_3d
@@ -83,33 +83,28 @@ class Form:
     name: str
     forward: Forward
     note: str = ""
-    samples_ms: list[float] | None = None
+    timing: Measurement | None = None
     max_output_difference: float = float("nan")
     disagreements: list[str] | None = None
 
     def as_dict(self) -> dict[str, Any]:
-        """The form's figures for the JSON file."""
-        samples = self.samples_ms or []
+        """The form's figures for the JSON file: its timing row and its agreement."""
+        timing = self.timing.as_dict() if self.timing else {"name": self.name, "note": self.note}
         return {
-            "name": self.name,
-            "p50_ms": statistics.median(samples) if samples else None,
-            "p95_ms": float(np.percentile(samples, 95)) if samples else None,
-            "samples_ms": samples,
+            **timing,
             "max_output_difference": self.max_output_difference,
             "disagreements": self.disagreements,
-            "note": self.note,
         }
 
 
 def torch_forward(network: nn.Module) -> Forward:
     """A forward pass of a torch module, as numpy arrays."""
+    return lambda grid: network_outputs(network, grid)
 
-    def forward(grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        with torch.inference_mode():
-            quality, rotation, width = network(torch.from_numpy(grid)[None, None])
-        return quality[0, 0].float().numpy(), rotation[0].float().numpy(), width[0, 0].float().numpy()
 
-    return forward
+def precision_name(dtype: torch.dtype) -> str:
+    """How the table names a compute precision."""
+    return "bfloat16" if dtype == torch.bfloat16 else "float32"
 
 
 def array_forward(run: Callable[[np.ndarray], list[np.ndarray]]) -> Forward:
@@ -144,11 +139,14 @@ def torch_forms(reference: nn.Module, compile_too: bool) -> tuple[list[Form], li
     dtypes = [torch.float32] + ([torch.bfloat16] if native_bf16(torch.device("cpu")) else [])
     forms = [Form(REFERENCE, torch_forward(reference), "baseline")]
     for dtype in dtypes:
-        label = "bfloat16" if dtype == torch.bfloat16 else "float32"
-        forms.append(Form(f"torch fast form {label}", torch_forward(FastVGN.from_vgn(reference, dtype))))
+        forms.append(
+            Form(
+                f"torch fast form {precision_name(dtype)}", torch_forward(FastVGN.from_vgn(reference, dtype))
+            )
+        )
     skipped = []
     for dtype in dtypes if compile_too else []:
-        label = "bfloat16" if dtype == torch.bfloat16 else "float32"
+        label = precision_name(dtype)
         forward = torch_forward(torch.compile(FastVGN.from_vgn(reference, dtype), dynamic=False))
         started = time.perf_counter()
         try:
@@ -204,7 +202,9 @@ def runtime_forms(reference: nn.Module, threads: int, directory: Path) -> tuple[
 
 
 def check_agreement(forms: list[Form], grids: list[tuple[str, np.ndarray]]) -> None:
-    """Fill in each form's largest output difference from the reference and its grasp disagreements."""
+    """Fill in each form's largest output difference from the reference (the first form) and what
+    the acceptance check finds: top-10 grasps, neighbouring near-ties excused where the outputs
+    agree voxel by voxel at the graspable voxels."""
     config = DetectionConfig(threshold=THRESHOLD)
 
     def grasps(grid: np.ndarray, outputs: tuple[np.ndarray, np.ndarray, np.ndarray]) -> list:
@@ -214,11 +214,13 @@ def check_agreement(forms: list[Form], grids: list[tuple[str, np.ndarray]]) -> N
     for form in forms:
         form.disagreements, largest = [], 0.0
         for name, grid in grids:
-            outputs = form.forward(grid)
-            for expected, actual in zip(reference[name], outputs, strict=True):
-                largest = max(largest, float(np.abs(np.asarray(actual, np.float32) - expected).max()))
-            found = disagreements(grasps(grid, reference[name]), grasps(grid, outputs), TOLERANCE,
-                                  neighbour_swaps=True)  # fmt: skip
+            outputs, expected = form.forward(grid), reference[name]
+            for want, got in zip(expected, outputs, strict=True):
+                largest = max(largest, float(np.abs(np.asarray(got, np.float32) - want).max()))
+            found = disagreements(
+                grasps(grid, expected), grasps(grid, outputs), TOLERANCE, neighbour_swaps=True
+            )
+            found += voxelwise_disagreements(expected, outputs, expected[0] >= 0.5, TOLERANCE)
             form.disagreements += [f"{name}: {reason}" for reason in found]
         form.max_output_difference = largest
 
@@ -226,29 +228,27 @@ def check_agreement(forms: list[Form], grids: list[tuple[str, np.ndarray]]) -> N
 def time_interleaved(
     forms: list[Form], grids: list[tuple[str, np.ndarray]], repeats: int, warmup: int
 ) -> None:
-    """Time every form once per round, on the rounds' grids in turn, after ``warmup`` untimed rounds."""
-    for form in forms:
-        form.samples_ms = []
-    for round_index in range(warmup + repeats):
-        grid = grids[round_index % len(grids)][1]
-        for form in forms:
-            started = time.perf_counter()
-            form.forward(grid)
-            if round_index >= warmup:
-                form.samples_ms.append((time.perf_counter() - started) * 1e3)
+    """Time every form once per round (``benchmarks.latency``'s schedule), on the grids in turn."""
+
+    def on_grid(form: Form) -> Callable[[int], object]:
+        return lambda i: form.forward(grids[i % len(grids)][1])
+
+    operations = [Operation(form.name, "forward", on_grid(form), form.note) for form in forms]
+    for form, timing in zip(forms, run_interleaved(operations, repeats, warmup), strict=True):
+        form.timing = timing
 
 
 def format_table(forms: list[Form]) -> str:
     """The forms as a text table, with speed-ups over the reference (the first form)."""
     width = max(len(form.name) for form in forms) + 2
-    reference = statistics.median(forms[0].samples_ms or [float("nan")])
+    reference = forms[0].timing.p50
     header = f"{'form':<{width}}{'p50 ms':>9}{'p95 ms':>9}{'x ref':>8}{'max |diff|':>12}  top-10 grasps  note"
     lines = [header, "-" * (len(header) + 8)]
     for form in forms:
-        row = form.as_dict()
+        timing = form.timing
         verdict = "agree" if not form.disagreements else f"{len(form.disagreements)} disagreement(s)"
         lines.append(
-            f"{form.name:<{width}}{row['p50_ms']:>9.2f}{row['p95_ms']:>9.2f}{reference / row['p50_ms']:>8.1f}"
+            f"{form.name:<{width}}{timing.p50:>9.2f}{timing.p95:>9.2f}{reference / timing.p50:>8.1f}"
             f"{form.max_output_difference:>12.2e}  {verdict:<13}  {form.note}"
         )
     return "\n".join(lines)

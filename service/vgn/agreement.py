@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
@@ -132,3 +133,11 @@ def voxelwise_disagreements(
         if angles.max() > tolerance.angle_deg:
             problems.append(f"orientation differs by up to {angles.max():.2f} deg at the masked voxels")
     return problems
+
+
+def network_outputs(network: torch.nn.Module, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quality (N³), rotation (4, N³) and width (N³) of a VGN-shaped ``network`` on one (N, N, N)
+    grid, float32 numpy: what the checks above compare."""
+    with torch.inference_mode():
+        quality, rotation, width = network(torch.from_numpy(grid)[None, None])
+    return quality[0, 0].float().numpy(), rotation[0].float().numpy(), width[0, 0].float().numpy()

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from client.schemas import Grasp
 from service.planner import GraspPlanner, InferenceOptions, native_bf16
 from service.settings import PACKAGED_MODEL
-from service.vgn.agreement import Tolerance, disagreements, voxelwise_disagreements
+from service.vgn.agreement import Tolerance, disagreements, network_outputs, voxelwise_disagreements
 from service.vgn.checkpoint import load_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import (
@@ -30,15 +30,8 @@ VOXEL = 0.3 / 40
 THRESHOLD = 0.3
 
 
-def outputs_of(network: torch.nn.Module, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Quality (N³), rotation (4, N³) and width (N³) of ``network`` on ``grid``, float32 numpy."""
-    with torch.inference_mode():
-        quality, rotation, width = network(torch.from_numpy(grid)[None, None])
-    return quality[0, 0].float().numpy(), rotation[0].float().numpy(), width[0, 0].float().numpy()
-
-
 def grasps_of(network: torch.nn.Module, grid: np.ndarray):
-    quality, rotation, width = outputs_of(network, grid)
+    quality, rotation, width = network_outputs(network, grid)
     return detect_grasps(
         grid, quality, rotation, width, VOXEL, np.eye(4), DetectionConfig(threshold=THRESHOLD)
     )
@@ -92,7 +85,7 @@ def test_fast_top10_grasps_agree_with_the_reference_on_recorded_scenes(dtype):
         # Where two neighbouring voxels nearly tie, NMS may keep the other one: the lists then
         # differ by a voxel, and the outputs must agree voxel by voxel for that to be a tie.
         assert disagreements(expected, actual, tolerance, neighbour_swaps=True) == [], name
-        outputs = [outputs_of(network, grid) for network in (reference, fast)]
+        outputs = [network_outputs(network, grid) for network in (reference, fast)]
         graspable = outputs[0][0] >= 0.5
         assert voxelwise_disagreements(*outputs, graspable, tolerance) == [], name
         compared += min(len(expected), 10)
@@ -108,7 +101,7 @@ def test_the_agreement_check_notices_a_different_network():
     tolerance = Tolerance(position_m=VOXEL)
     name, grid = recorded_grids()[0]
     assert disagreements(grasps_of(reference, grid), grasps_of(FastVGN.from_vgn(other), grid), tolerance)
-    outputs = [outputs_of(network, grid) for network in (reference, FastVGN.from_vgn(other))]
+    outputs = [network_outputs(network, grid) for network in (reference, FastVGN.from_vgn(other))]
     assert voxelwise_disagreements(*outputs, outputs[0][0] >= 0.5, tolerance)
 
 
