@@ -1,9 +1,20 @@
 #!/usr/bin/env bash
-# Install vgn-service with every extra (service, simulator, dev tools) into the current Python.
+# Install vgn-service into the current Python with the exact versions CI tested (requirements/).
+#   bash install.sh         the service and the simulator: what `vgn-client clear-scene --sim` needs
+#   bash install.sh --dev   every extra with the test tools (and Chromium for the browser test): CI's
 # Open3D needs a few system libraries (libusb-1.0 above all); they are installed here when
 # missing (apt-based systems).
 set -euo pipefail
 cd "$(dirname "$0")"
+
+dev=0
+for arg in "$@"; do
+  case "$arg" in
+    --dev) dev=1 ;;
+    -h|--help) sed -n 2,4p "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "install.sh: unknown option $arg (use --dev for the test tools)" >&2; exit 2 ;;
+  esac
+done
 
 # System libraries open3d links against, with their Debian packages.
 needed=(libusb-1.0.so.0:libusb-1.0-0 libGL.so.1:libgl1 libEGL.so.1:libegl1 libX11.so.6:libx11-6
@@ -24,7 +35,7 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 
 # Headless Chromium for the viewer's browser test (tests/service/test_viewer.py fails without it).
-if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+if [ "$dev" = 1 ] && { ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; }; then
   if command -v apt-get >/dev/null 2>&1; then
     sudo=""
     [ "$(id -u)" -ne 0 ] && sudo="sudo"
@@ -35,8 +46,14 @@ if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null
   fi
 fi
 
-# torch is pinned (==2.13.0) in pyproject.toml. Where pip is configured with a local CPU wheel
+# The lock pins every package (requirements/README.md; tests/test_lock.py checks it is current
+# and installed). torch is pinned (==2.13.0): where pip is configured with a local CPU wheel
 # (find-links, as on our development machines) it takes that; elsewhere add
 # PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu to get the CPU build, not CUDA.
 # ray and runtimes: the --ray tests and the runtime comparison's tests run in CI too.
-python3 -m pip install --quiet --disable-pip-version-check -e ".[all,dev,ray,runtimes]"
+if [ "$dev" = 1 ]; then
+  lock=requirements/full.txt extras=all,dev,ray,runtimes
+else
+  lock=requirements/main.txt extras=service,sim
+fi
+python3 -m pip install --quiet --disable-pip-version-check -c "$lock" -e ".[$extras]"

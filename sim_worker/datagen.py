@@ -24,6 +24,14 @@ from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views
 from sim_worker.grasping import execute_grasp
 from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.objects import ObjectSet, object_set
+from sim_worker.recipes import (
+    ObjectTable,
+    SceneRecipe,
+    object_roots,
+    recipe_arrays,
+    record_recipe,
+    render_views,
+)
 from sim_worker.scenes import generate_scene, poisson_object_count
 from sim_worker.service_session import fresh_session
 from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
@@ -112,39 +120,91 @@ def middle_of_widest_run(successes: np.ndarray) -> int | None:
     return None if best is None else (best[0] + best[1] - 1) // 2
 
 
-class SceneLabeller:
-    """One simulated world and one service session, reused scene after scene."""
+@dataclass
+class BuiltScene:
+    """A data-generation scene standing in the builder's world, with its original observation
+    drawn: ``rng`` continues the scene's stream (its next draws are the depth noise, when
+    ``noisy``, then the labelling's)."""
 
-    def __init__(self, vgn: VGNClient, config: DataGenConfig) -> None:
-        self.vgn, self.config = vgn, config
+    index: int
+    rng: np.random.Generator
+    camera_poses: list[np.ndarray]
+    noisy: bool
+    side_view: bool
+
+
+class SceneBuilder:
+    """One simulated world that builds data-generation scenes from (seed, index) alone: the
+    same scene whichever process builds it and whatever it built before."""
+
+    def __init__(self, config: DataGenConfig) -> None:
+        self.config = config
         self.world = World(renderer=config.renderer)
-        self.gripper = Gripper(self.world)
         self.camera = Camera(self.world)
         self.objects = merged_object_set(config.objects, config.scene)
-        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
-        self.trial_seconds = 0.0
-        self.trials = 0
+        self.gripper = Gripper(self.world)
 
-    def close(self) -> None:
-        """Delete the service session and close the simulator, even when the first fails."""
-        try:
-            self.vgn.delete_session(self.session_id)
-        finally:
-            self.world.close()
-
-    def label_scene(self, index: int) -> tuple[SceneViews, np.ndarray] | None:
-        """Views and grasp rows (qx, qy, qz, qw, x, y, z, width, label) of scene ``index``,
-        or None when the scene came out empty."""
+    def build(self, index: int) -> BuiltScene | None:
+        """Scene ``index`` settled in the world and its views drawn; None when it came out empty."""
         rng = np.random.default_rng([self.config.seed, index])
-        self.camera.rng = rng
         self.world.reset()  # the scene depends on (seed, index) alone, not on earlier scenes
         self.gripper = Gripper(self.world)
         generate_scene(self.world, self.config.scene, self.objects, poisson_object_count(rng), rng)
         if not self.world.objects:
             return None
         noisy, side = self.config.scene_conditions(index)
-        self.camera.noise = DepthNoise() if noisy else None
-        views = self._observe(rng, side)
+        if side:
+            poses = random_views(rng, 1, tilt_deg=SIDE_VIEW_TILT_DEG)
+        else:
+            poses = random_views(rng, int(rng.integers(1, self.config.max_views + 1)))
+        return BuiltScene(index, rng, poses, noisy, side)
+
+    def recipe(self, built: BuiltScene, table: ObjectTable) -> SceneRecipe:
+        """The recipe of the scene just built; call it before :meth:`render`, which draws the noise."""
+        return record_recipe(self.world, scene_id(self.config.seed, built.index), table, built.camera_poses,
+                             built.rng if built.noisy else None, built.side_view)  # fmt: skip
+
+    def render(self, built: BuiltScene) -> np.ndarray:
+        """(V, H, W) depth of the original observation, noise drawn from the scene's stream."""
+        return render_views(self.camera, built.camera_poses, DepthNoise() if built.noisy else None, built.rng)
+
+    def close(self) -> None:
+        """Close the simulator."""
+        self.world.close()
+
+
+class SceneLabeller:
+    """One scene builder and one service session, reused scene after scene."""
+
+    def __init__(self, vgn: VGNClient, config: DataGenConfig, table: ObjectTable | None = None) -> None:
+        self.vgn, self.config = vgn, config
+        self.builder = SceneBuilder(config)
+        self.world = self.builder.world
+        self.table = table if table is not None else ObjectTable(object_roots())
+        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
+        self.trial_seconds = 0.0
+        self.trials = 0
+
+    @property
+    def gripper(self) -> Gripper:
+        """The hand of the scene being labelled (made anew with every scene)."""
+        return self.builder.gripper
+
+    def close(self) -> None:
+        """Delete the service session and close the simulator, even when the first fails."""
+        try:
+            self.vgn.delete_session(self.session_id)
+        finally:
+            self.builder.close()
+
+    def label_scene(self, index: int) -> tuple[SceneViews, np.ndarray, SceneRecipe] | None:
+        """Views, grasp rows (qx, qy, qz, qw, x, y, z, width, label) and recipe of scene
+        ``index``, or None when the scene came out empty."""
+        built = self.builder.build(index)
+        if built is None:
+            return None
+        recipe = self.builder.recipe(built, self.table)
+        views = self._observe(built)
         if not np.any(self.vgn.tsdf(self.session_id) > 0.5):
             return None  # the fused grid holds no observed surface: nothing to label
         cloud = self.vgn.cloud(self.session_id)
@@ -152,26 +212,21 @@ class SceneLabeller:
         candidates = cloud[inside & (cloud[:, 5] > MIN_NORMAL_Z)]
         if not len(candidates):
             return None
+        rng = built.rng
         state = self.world.save_state()
         try:
             rows = [self._label_point(candidates[int(rng.integers(len(candidates)))], rng, state)
                     for _ in range(self.config.points_per_scene)]  # fmt: skip
         finally:
             self.world.discard_state(state)
-        return views, np.asarray(rows)
+        return views, np.asarray(rows), recipe
 
-    def _observe(self, rng: np.random.Generator, side: bool = False) -> SceneViews:
-        if side:
-            poses = random_views(rng, 1, tilt_deg=SIDE_VIEW_TILT_DEG)
-        else:
-            poses = random_views(rng, int(rng.integers(1, self.config.max_views + 1)))
+    def _observe(self, built: BuiltScene) -> SceneViews:
         self.session_id = fresh_session(self.vgn, self.session_id)
-        depths = []
-        for pose in poses:
-            depth = self.camera.render_depth(pose)
+        depths = self.builder.render(built)
+        for depth, pose in zip(depths, built.camera_poses, strict=True):
             self.vgn.add_frame(self.session_id, depth, pose)
-            depths.append(depth)
-        return SceneViews(np.stack(depths), np.stack(poses))
+        return SceneViews(depths, np.stack(built.camera_poses))
 
     def _label_point(self, point_normal: np.ndarray, rng: np.random.Generator, state: int) -> np.ndarray:
         spec: GripperSpec = self.gripper.spec
@@ -229,8 +284,8 @@ def generate(
                 if report:
                     report(sid, 0, time.perf_counter() - started)
                 continue
-            views, rows = labelled
-            dataset.add_scene(sid, views, rows)
+            views, rows, recipe = labelled
+            dataset.add_scene(sid, views, rows, recipe_arrays(recipe, labeller.table))
             if report:
                 report(sid, len(rows), time.perf_counter() - started)
     finally:

@@ -49,8 +49,9 @@ def _worker(
 def run(args: argparse.Namespace) -> int:
     """``vgn-client generate-data --sim``: label the scenes missing from the dataset folder in worker
     processes (or on Ray); returns the exit status."""
-    if (args.workers is not None and args.workers < 1) or args.scenes < 0:
-        print("error: --workers must be >= 1 and --scenes >= 0", file=sys.stderr)
+    first = getattr(args, "first", 0)
+    if (args.workers is not None and args.workers < 1) or args.scenes < 0 or first < 0:
+        print("error: --workers must be >= 1, --scenes and --first >= 0", file=sys.stderr)
         return 2
     try:
         config = DataGenConfig(scene=args.scene, objects=tuple(args.objects or ()), seed=args.seed,
@@ -78,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     for leftover in remove_stale_temporaries(out):
         print(f"removed {leftover}, left by a killed writer", file=sys.stderr)
     done = dataset.done_scene_ids()
-    todo = [i for i in range(args.scenes) if scene_id(args.seed, i) not in done]
+    indices = range(first, first + args.scenes)
+    todo = [i for i in indices if scene_id(args.seed, i) not in done]
     if getattr(args, "ray", None) is not None:  # the scenes spread over a Ray cluster instead
         from sim_worker.ray_runner import generate_on_ray
 

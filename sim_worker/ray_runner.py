@@ -92,7 +92,7 @@ def cluster_cpus() -> int:
 
 @dataclass
 class SceneResult:
-    """What a worker sends back for one scene: its views and grasp rows, or None when empty."""
+    """What a worker sends back for one scene: its views, grasp rows and recipe arrays, or None when empty."""
 
     index: int
     depth: Any
@@ -100,6 +100,7 @@ class SceneResult:
     rows: Any
     seconds: float
     node: str
+    recipe: Any = None
 
 
 class ServiceHost:
@@ -159,8 +160,11 @@ class SimWorker:
         seconds = time.perf_counter() - started
         if labelled is None:
             return SceneResult(index, None, None, None, seconds, self.node)
-        views, rows = labelled
-        return SceneResult(index, views.depth, views.camera_poses, rows, seconds, self.node)
+        from sim_worker.recipes import recipe_arrays
+
+        views, rows, recipe = labelled
+        arrays = recipe_arrays(recipe, self.labellers[config].table)
+        return SceneResult(index, views.depth, views.camera_poses, rows, seconds, self.node, arrays)
 
     def prepare_clutter(self, config: ClutterConfig, resolve: Callable) -> tuple[bool, str, Any]:
         """(service ready, its detail, ``config`` with the planner resolved by ``resolve``)."""
@@ -312,7 +316,9 @@ def generate_on_ray(
             if result.rows is None:
                 dataset.mark_empty(sid)
             else:
-                dataset.add_scene(sid, SceneViews(result.depth, result.camera_poses), result.rows)
+                dataset.add_scene(
+                    sid, SceneViews(result.depth, result.camera_poses), result.rows, result.recipe
+                )
                 grasps += len(result.rows)
             nodes.append(result.node)
             bar.update(1)

@@ -3,6 +3,7 @@
     DIR/setup.json           size, intrinsics, max_opening_width, finger_depth
     DIR/grasps.csv           scene_id,qx,qy,qz,qw,x,y,z,width,label  (metres, workspace frame)
     DIR/scenes/<id>.npz      depth_imgs (n, H, W) float32, extrinsics (n, 7) [qx,qy,qz,qw,tx,ty,tz] world→camera
+    DIR/recipes/<id>.npz     (ours, optional) the scene's recipe: objects, poses, original views
 
 Public VGN/GIGA raw datasets use the same layout, so they read and train here unchanged.
 Every write is atomic (temp file + rename) so an interrupted writer never leaves a torn
@@ -135,6 +136,7 @@ class RawDataset:
     def __init__(self, root: Path, setup: DatasetSetup | None = None) -> None:
         self.root = Path(root)
         self.scenes_dir = self.root / "scenes"
+        self.recipes_dir = self.root / "recipes"
         setup_path = self.root / "setup.json"
         if setup_path.exists():
             self.setup = DatasetSetup.from_json(json.loads(setup_path.read_text()))
@@ -152,14 +154,25 @@ class RawDataset:
         if not self.grasps_path.exists():
             write_atomically(self.grasps_path, ",".join(GRASP_COLUMNS) + "\n")
 
-    def add_scene(self, scene_id: str, views: SceneViews, grasps: np.ndarray) -> None:
+    def add_scene(
+        self,
+        scene_id: str,
+        views: SceneViews,
+        grasps: np.ndarray,
+        recipe: dict[str, np.ndarray] | None = None,
+    ) -> None:
         """Store a scene and its grasps: rows (qx, qy, qz, qw, x, y, z, width, label) in the
-        workspace frame. The scene file lands first; the grasp rows make it count."""
+        workspace frame, and its recipe (``recipes/<id>.npz``: the arrays of
+        ``sim_worker.recipes.recipe_arrays``) when given. The files land first; the grasp rows
+        make the scene count."""
         if not scene_id.replace("-", "").replace("_", "").isalnum():
             raise ValueError(f"scene id {scene_id!r} must be alphanumeric (with - or _)")
         arrays = {"depth_imgs": views.depth.astype(np.float32), "extrinsics": views.extrinsics()}
         with atomic_writer(self.scenes_dir / f"{scene_id}.npz") as stream:
             np.savez_compressed(stream, **arrays)
+        if recipe is not None:
+            with atomic_writer(self.recipes_dir / f"{scene_id}.npz") as stream:
+                np.savez(stream, **recipe)
         rows = np.asarray(grasps, dtype=np.float64).reshape(-1, 9)
         self._append(_csv_lines([scene_id] * len(rows), rows))
 
@@ -217,6 +230,14 @@ class RawDataset:
     def scene_ids(self) -> list[str]:
         """Scenes with grasps."""
         return sorted({row[0] for row in self._rows()})
+
+    def read_recipe(self, scene_id: str) -> dict[str, np.ndarray] | None:
+        """The arrays of a scene's recipe, or None when the scene was stored without one."""
+        path = self.recipes_dir / f"{scene_id}.npz"
+        if not path.is_file():
+            return None
+        with np.load(path) as data:
+            return {name: data[name] for name in data.files}
 
     def read_scene(self, scene_id: str) -> SceneViews:
         """The depth images and camera poses of one scene file."""

@@ -16,6 +16,7 @@ from service.training import report
 from service.training.card import write_card
 from service.training.checkpoint import CheckpointMismatch, checkpoint_path
 from service.training.evaluate import EvaluationConfig, executed_grasp_success
+from service.training.observations import ObservationSettings
 from service.training.train import TrainConfig, TrainingError, TrainResult, train
 
 #: The run's defaults live on TrainConfig; the options show and use them.
@@ -26,8 +27,9 @@ Train the Volumetric Grasping Network on one or more raw VGN datasets (the layou
 `setup.json`, `grasps.csv` and `scenes/*.npz` make up; the sim worker writes it, and public
 VGN/GIGA raw datasets use it too).
 
-A --data folder is a raw dataset or a packed shard folder (vgn-pack-data; the repository's
-data/). Raw scenes' depth images are fused into a 40^3 TSDF grid with the service's own TSDF
+A --data folder is a raw dataset, a folder of scene recipes (the repository's data/: each
+scene's observations are rendered from its recipe and cached, see --observations) or of grid
+shards (vgn-pack-data). Raw scenes' depth images are fused into a 40^3 TSDF grid with the service's own TSDF
 code and cached (by default in <data>/.cache/). One forward pass per scene draw scores its
 labels with VGN's loss; each draw is turned by a multiple of 90 degrees about z, placed at a
 random height, and keeps its positives and as many random negatives. Scenes are split into
@@ -69,7 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         type=Path,
         default=None,
-        help="where to cache fused grids (default: <data>/.cache/grids-<N>-<key>)",
+        help="where to cache fused grids (default: <data>/.cache/grids-<N>-<key>) and recipe folders' "
+        "rendered observations (default: ~/.cache/vgn-service/observations)",
     )
     data.add_argument(
         "--val-fraction",
@@ -118,6 +121,34 @@ def build_parser() -> argparse.ArgumentParser:
         default=DEFAULTS["copies"],
         help="draws of each training scene per epoch, each augmented and label-subsampled anew "
         "(default %(default)s)",
+    )
+    data.add_argument(
+        "--observations",
+        metavar="K",
+        type=int,
+        default=1,
+        help="recipe folders: observations rendered per scene (cached, see --cache); with K > 1 every "
+        "draw of a scene shows one of them at random (default %(default)s: the original observation only)",
+    )
+    data.add_argument(
+        "--observation-noise",
+        metavar="F",
+        type=float,
+        default=ObservationSettings.noise_fraction,
+        help="share of fresh observations with Dex-Net depth noise (default %(default)s)",
+    )
+    data.add_argument(
+        "--observation-side-views",
+        metavar="F",
+        type=float,
+        default=ObservationSettings.side_view_fraction,
+        help="share of fresh observations that are one side view (default %(default)s)",
+    )
+    data.add_argument(
+        "--no-original",
+        dest="original",
+        action="store_false",
+        help="recipe folders: every observation fresh (default: the first is the scene's original one)",
     )
     data.add_argument(
         "--no-balance",
@@ -295,6 +326,12 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         teacher=args.teacher,
         distill_weight=args.distill_weight,
         soft_per_draw=args.soft_per_draw,
+        observations=ObservationSettings(
+            per_scene=args.observations,
+            original=args.original,
+            noise_fraction=args.observation_noise,
+            side_view_fraction=args.observation_side_views,
+        ),  # fmt: skip
         resume=args.resume,
         fresh=args.fresh,
         progress=args.progress,

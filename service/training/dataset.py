@@ -22,7 +22,10 @@ from service.training.augment import Placement, balanced_subset, draw_height, dr
 from service.training.distill import SoftTargets
 from service.training.grids import GridSource, cache_dir, cache_key, ensure_cached
 from service.training.labels import LabelSet
+from service.training.observations import ObservationSettings, open_cache, render_cache
+from service.training.recipe_shards import RecipeFolder
 from service.training.shards import ShardFolder, dequantize
+from sim_worker.objects import default_cache_dir
 from vgn_data.dataset import RawDataset
 from vgn_data.files import remove_stale_temporaries
 
@@ -46,13 +49,38 @@ class PackedGrid:
         return self.load()
 
 
+@dataclass(frozen=True, eq=False)
+class RenderedObservations:
+    """A recipe scene's cached observations (row ``row`` of a shard's memory-mapped
+    (S, K, N, N, N) cache): ``load`` gives the first, ``draw`` one of the K at random."""
+
+    grids: np.ndarray
+    row: int
+
+    def load(self) -> np.ndarray:
+        """The first observation (the original one when the cache holds it), as float32."""
+        return dequantize(np.asarray(self.grids[self.row, 0]))
+
+    def draw(self, rng: np.random.Generator) -> np.ndarray:
+        """One of the scene's observations, drawn uniformly, as float32."""
+        return dequantize(np.asarray(self.grids[self.row, int(rng.integers(self.grids.shape[1]))]))
+
+    def is_cached(self) -> bool:
+        """Always: the cache was rendered before training (``vgn-data render``)."""
+        return True
+
+    def build(self) -> np.ndarray:
+        """The same as ``load``."""
+        return self.load()
+
+
 @dataclass(frozen=True)
 class Scene:
     """One scene: where its grid comes from and its labels (voxel units)."""
 
     dataset: int
     scene_id: str
-    source: GridSource | PackedGrid
+    source: GridSource | PackedGrid | RenderedObservations
     labels: LabelSet
     voxel_size: float
 
@@ -83,17 +111,31 @@ class DatasetSummary:
 
 
 def load_scenes(
-    data_dirs: list[Path], resolution: int, max_depth: float, cache_root: Path | None = None
+    data_dirs: list[Path],
+    resolution: int,
+    max_depth: float,
+    cache_root: Path | None = None,
+    observations: ObservationSettings | None = None,
+    workers: int = 0,
+    progress: bool = False,
 ) -> tuple[list[Scene], list[DatasetSummary]]:
     """Scenes with at least one label inside the grid, in a stable order, and per-dataset counts.
 
-    A folder is either a raw dataset or a packed shard folder (``manifest.json``; its grids were
-    fused when packed, at the manifest's resolution and depth cut-off). Raises
-    ``FileNotFoundError`` for a folder that is neither.
+    A folder is a raw dataset, a folder of scene recipes (``manifest.json`` format 2: the
+    observations ``observations`` asks for are rendered into ``cache_root`` first, where
+    missing) or of grid shards (format 1; its grids were fused when packed). Raises
+    ``FileNotFoundError`` for a folder that is none of them.
     """
     scenes: list[Scene] = []
     summaries: list[DatasetSummary] = []
     for index, data_dir in enumerate(data_dirs):
+        if RecipeFolder(Path(data_dir)).exists():
+            settings = observations or ObservationSettings()
+            rendered, summary = _load_recipes(index, Path(data_dir), resolution, max_depth, settings,
+                                              cache_root, workers, progress)  # fmt: skip
+            scenes += rendered
+            summaries.append(summary)
+            continue
         if ShardFolder(Path(data_dir)).exists():
             packed, summary = _load_packed(index, Path(data_dir), resolution, max_depth)
             scenes += packed
@@ -149,6 +191,50 @@ def _load_packed(
                 summary.scenes_without_labels += 1
                 continue
             scenes.append(Scene(index, str(scene_id), PackedGrid(grid), labels, voxel_size))
+            positives = int(labels.label.sum())
+            summary.scenes += 1
+            summary.grasps += len(labels)
+            summary.positives += positives
+            summary.negatives += len(labels) - positives
+    return scenes, summary
+
+
+def _load_recipes(
+    index: int,
+    folder: Path,
+    resolution: int,
+    max_depth: float,
+    settings: ObservationSettings,
+    cache_root: Path | None,
+    workers: int,
+    progress: bool,
+) -> tuple[list[Scene], DatasetSummary]:
+    """Scenes of a recipe folder with their rendered observations (rendered now where missing)."""
+    recipes = RecipeFolder(folder)
+    manifest = recipes.manifest()
+    if manifest["resolution"] != resolution or manifest["max_depth"] != max_depth:
+        raise ValueError(f"{folder} holds recipes for resolution {manifest['resolution']} and depth cut-off "
+                         f"{manifest['max_depth']} m; this run asks for {resolution} and {max_depth} m")  # fmt: skip
+    cache = Path(cache_root) if cache_root is not None else default_cache_dir() / "observations"
+    bar = tqdm(total=sum(e["scenes"] for e in manifest["shards"]), desc="observations", unit="scene",
+               disable=not progress, leave=False)  # fmt: skip
+    try:
+        paths = render_cache(folder, cache, settings, max(1, workers), progress=bar.update)
+    finally:
+        bar.close()
+    size = float(manifest["setup"]["size"])
+    voxel_size = size / resolution
+    summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, str(cache))
+    scenes: list[Scene] = []
+    for shard, path in zip(recipes.load(verify=True), paths, strict=True):
+        grids = open_cache(path, len(shard.scene_ids), settings)
+        for row, (scene_id, rows) in enumerate(zip(shard.scene_ids, shard.labels_by_scene(), strict=True)):
+            labels, outside = LabelSet.from_rows(rows, voxel_size, resolution)
+            summary.outside_grid += outside
+            if not len(labels):
+                summary.scenes_without_labels += 1
+                continue
+            scenes.append(Scene(index, scene_id, RenderedObservations(grids, row), labels, voxel_size))
             positives = int(labels.label.sum())
             summary.scenes += 1
             summary.grasps += len(labels)
@@ -249,7 +335,9 @@ class SceneDataset(Dataset[Sample]):
     ``balance`` a draw keeps all positives and as many random negatives; ``augment`` is
     ``"height"`` (a quarter-turn and a random height over the label-preserving range, VGN's),
     ``"shift"`` (a quarter-turn and a ±4 voxel shift) or ``None``. ``soft`` (one per scene)
-    adds ``soft_per_draw`` of a teacher's soft labels to every draw, moved with the grid.
+    adds ``soft_per_draw`` of a teacher's soft labels to every draw, moved with the grid. With
+    ``fresh_observations`` a recipe scene shows one of its rendered observations at random at
+    every draw (else always its first).
     """
 
     def __init__(
@@ -261,6 +349,7 @@ class SceneDataset(Dataset[Sample]):
         balance: bool = False,
         soft: list[SoftTargets] | None = None,
         soft_per_draw: int = 512,
+        fresh_observations: bool = False,
     ) -> None:
         if augment not in (None, "height", "shift"):
             raise ValueError(f"augment must be 'height', 'shift' or None, got {augment!r}")
@@ -273,6 +362,7 @@ class SceneDataset(Dataset[Sample]):
         self.balance = balance
         self.soft = soft
         self.soft_per_draw = soft_per_draw
+        self.fresh_observations = fresh_observations
         self.epoch = 0
 
     def __len__(self) -> int:
@@ -281,10 +371,16 @@ class SceneDataset(Dataset[Sample]):
     def __getitem__(self, index: int) -> Sample:
         scene_index = index % len(self.scenes)
         scene = self.scenes[scene_index]
-        grid, labels = torch.from_numpy(scene.source.load()), scene.labels
+        rng = np.random.default_rng([self.seed, self.epoch, index])
+        if self.fresh_observations and isinstance(scene.source, RenderedObservations):
+            grid = torch.from_numpy(
+                scene.source.draw(np.random.default_rng([self.seed, self.epoch, index, 1]))
+            )
+        else:
+            grid = torch.from_numpy(scene.source.load())
+        labels = scene.labels
         if not (self.augment or self.balance or self.soft is not None):
             return Sample(grid, labels, scene.voxel_size)
-        rng = np.random.default_rng([self.seed, self.epoch, index])
         if self.balance:
             labels = balanced_subset(labels, rng)
         placement: Placement | None = None

@@ -16,7 +16,7 @@ import shlex
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ from service.training.checkpoint import (
 )
 from service.training.dataset import (
     DatasetSummary,
+    RenderedObservations,
     Scene,
     SceneDataset,
     load_scenes,
@@ -50,6 +51,7 @@ from service.training.distill import SoftTargets, teach
 from service.training.grids import MAX_DEPTH, RESOLUTION
 from service.training.loss import distillation_loss, gather, per_label_loss
 from service.training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
+from service.training.observations import ObservationSettings
 from service.training.shards import ShardFolder, manifest_summary
 from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
@@ -99,6 +101,8 @@ class TrainConfig:
     distill_weight: float = 1.0
     #: soft labels drawn per scene draw (from the teacher's grasp-region voxels)
     soft_per_draw: int = 512
+    #: observations of recipe folders: how many per scene are rendered and how they are drawn
+    observations: ObservationSettings = field(default_factory=ObservationSettings)
     resume: bool = False
     fresh: bool = False
     progress: bool = True
@@ -164,7 +168,8 @@ def train(
         raise TrainingError("--device cuda was asked for but torch sees no CUDA GPU")
     torch.manual_seed(config.seed)
 
-    scenes, summaries = load_scenes(config.data, config.resolution, config.max_depth, config.cache)
+    scenes, summaries = load_scenes(config.data, config.resolution, config.max_depth, config.cache,
+                                    config.observations, config.workers, config.progress)  # fmt: skip
     if not scenes:
         raise TrainingError(f"no labelled scenes inside the grid in {', '.join(map(str, config.data))}")
     train_scenes, val_scenes = split_scenes(scenes, config.val_fraction, config.seed)
@@ -198,6 +203,7 @@ def train(
         balance=config.balance,
         soft=soft,
         soft_per_draw=config.soft_per_draw,
+        fresh_observations=config.observations.per_scene > 1,
     )
     val_data = SceneDataset(val_scenes, augment=None, seed=config.seed)
     if will_train:
@@ -494,6 +500,9 @@ def _training_settings(
             "weight": config.distill_weight,
             "soft_labels_per_draw": config.soft_per_draw,
         },
+        "observations": asdict(config.observations)
+        if any(isinstance(s.source, RenderedObservations) for s in train_scenes)
+        else None,  # fmt: skip
         "resolution": config.resolution,
         "max_depth": config.max_depth,
         "device": str(device),

@@ -1,0 +1,194 @@
+"""Observations of recipe scenes for training: K rendered grids per scene, cached outside the
+repository.
+
+A recipe holds a scene, not a view of it, so training can see each scene through fresh views and
+fresh sensor noise. Rendering and fusing a view takes tens of milliseconds, far more than a
+training step can wait for on a small machine, so ``vgn-data render`` renders K observations per
+scene once (in worker processes), and training draws one of the K at every draw of the scene.
+Slot 0 can hold the scene's original observation (the grid its labels were made on).
+
+A cache file per shard, ``<cache>/<shard sha256[:16]>-<settings key>.npy``: (S, K, N, N, N)
+uint8, ``round(255 * grid)``, memory-mapped when read. Every observation is fixed by (scene id,
+slot, settings), so a cache rebuilt anywhere holds the same grids.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import multiprocessing
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from service.training.grids import RESOLUTION
+from service.training.recipe_grids import observation_grid
+from service.training.recipe_shards import RecipeFolder
+from service.training.shards import quantize
+from vgn_data.files import atomic_writer
+
+#: Bump when rendering or fusing changes, so old caches stop matching.
+OBSERVATION_FORMAT = 1
+#: Single side views look from this far off vertical (degrees), as data generation's.
+SIDE_VIEW_TILT_DEG = (45.0, 65.0)
+
+
+@dataclass(frozen=True)
+class ObservationSettings:
+    """How a scene's training observations are drawn.
+
+    ``per_scene`` observations per scene; with ``original`` the first is the scene's original
+    observation. The others take 1..``max_views`` views from above as data generation does
+    (distance U(0.48, 0.72) m, tilt U(0°, 45°)), or with probability ``side_view_fraction`` one
+    side view (tilt U(45°, 65°)); with probability ``noise_fraction`` the depth carries Dex-Net
+    noise (``sim_worker.camera.DepthNoise``).
+    """
+
+    per_scene: int = 1
+    original: bool = True
+    max_views: int = 6
+    side_view_fraction: float = 0.2
+    noise_fraction: float = 0.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.per_scene < 1 or self.max_views < 1:
+            raise ValueError("per_scene and max_views must be >= 1")
+        for name in ("side_view_fraction", "noise_fraction"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
+
+    def key(self) -> str:
+        """Short hash of everything an observation depends on besides the scene."""
+        text = json.dumps(
+            {**asdict(self), "format": OBSERVATION_FORMAT, "resolution": RESOLUTION}, sort_keys=True
+        )
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+    def rng(self, scene_id: str, slot: int) -> np.random.Generator:
+        """The generator of one observation: fixed by the scene, the slot and the seed."""
+        scene = int.from_bytes(hashlib.sha256(scene_id.encode()).digest()[:8], "big")
+        return np.random.default_rng([self.seed, scene, slot])
+
+
+def draw_cameras(settings: ObservationSettings, rng: np.random.Generator) -> tuple[list[np.ndarray], bool]:
+    """Camera poses (camera → world) of one fresh observation, and whether it is noisy."""
+    from sim_worker.camera import random_views
+
+    noisy = bool(rng.random() < settings.noise_fraction)
+    if rng.random() < settings.side_view_fraction:
+        return random_views(rng, 1, tilt_deg=SIDE_VIEW_TILT_DEG), noisy
+    return random_views(rng, int(rng.integers(1, settings.max_views + 1))), noisy
+
+
+class ObservationRenderer:
+    """Simulator worlds that render the observations of recipes (one set per worker process),
+    each recipe with the renderer its original observation was drawn with."""
+
+    def __init__(self, settings: ObservationSettings, vgn_objects: str | None = None) -> None:
+        from sim_worker.recipes import object_roots
+
+        self.settings = settings
+        self.roots = object_roots(vgn_objects)
+        self.cameras: dict[str, Any] = {}
+
+    def _camera(self, renderer: str) -> Any:
+        from sim_worker.camera import Camera
+        from sim_worker.world import World
+
+        if renderer not in self.cameras:
+            self.cameras[renderer] = Camera(World(renderer=renderer))  # type: ignore[arg-type]
+        return self.cameras[renderer]
+
+    def observations(self, recipe: Any) -> np.ndarray:
+        """(K, N, N, N) uint8 observations of one recipe (a ``SceneRecipe``)."""
+        from sim_worker.camera import DepthNoise
+        from sim_worker.recipes import pose_vector, rebuild, render_original, render_views
+
+        camera = self._camera(recipe.renderer)
+        rebuild(camera.world, recipe, self.roots)
+        grids = []
+        for slot in range(self.settings.per_scene):
+            if slot == 0 and self.settings.original:
+                depths, views = render_original(camera, recipe), recipe.views
+            else:
+                rng = self.settings.rng(recipe.scene_id, slot)
+                poses, noisy = draw_cameras(self.settings, rng)
+                depths = render_views(camera, poses, DepthNoise() if noisy else None, rng)
+                views = np.stack([pose_vector(c) for c in poses])
+            grids.append(quantize(observation_grid(depths, views)))
+        return np.stack(grids)
+
+    def close(self) -> None:
+        """Close the simulators."""
+        for camera in self.cameras.values():
+            camera.world.close()
+
+
+def cache_path(cache: Path, shard_sha256: str, settings: ObservationSettings) -> Path:
+    """The cache file of one shard under ``settings``."""
+    return Path(cache) / f"{shard_sha256[:16]}-{settings.key()}.npy"
+
+
+_renderer: ObservationRenderer | None = None
+
+
+def _start_worker(settings: ObservationSettings, vgn_objects: str | None) -> None:
+    global _renderer
+    from client.lifetime import end_with_parent
+
+    end_with_parent()
+    _renderer = ObservationRenderer(settings, vgn_objects)
+
+
+def _render_recipes(recipes: list[object]) -> list[np.ndarray]:
+    return [_renderer.observations(recipe) for recipe in recipes]
+
+
+def render_cache(
+    data: Path,
+    cache: Path,
+    settings: ObservationSettings,
+    workers: int = 1,
+    vgn_objects: str | None = None,
+    progress: Callable[[int], object] | None = None,
+) -> list[Path]:
+    """Render the observations of every shard of ``data`` whose cache file is missing; returns
+    every shard's cache file. A file is written whole (atomically) once its shard is done."""
+    folder = RecipeFolder(data)
+    manifest = folder.manifest()
+    paths = []
+    context = multiprocessing.get_context("spawn")  # PyBullet and fork do not mix
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
+                             initargs=(settings, vgn_objects)) as pool:  # fmt: skip
+        for entry, shard in zip(manifest["shards"], folder.load(), strict=True):
+            path = cache_path(cache, entry["sha256"], settings)
+            paths.append(path)
+            if path.is_file():
+                continue
+            recipes = [shard.recipe(row) for row in range(len(shard.scene_ids))]
+            chunks = [recipes[start : start + 16] for start in range(0, len(recipes), 16)]
+            grids = []
+            for chunk in pool.map(_render_recipes, chunks):
+                grids += chunk
+                if progress:
+                    progress(len(chunk))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_writer(path) as stream:
+                np.save(stream, np.stack(grids))
+    return paths
+
+
+def open_cache(path: Path, scenes: int, settings: ObservationSettings) -> np.ndarray:
+    """A shard's cached observations, memory-mapped; ``ValueError`` when the file does not fit."""
+    grids = np.load(path, mmap_mode="r")
+    n = RESOLUTION
+    if grids.shape != (scenes, settings.per_scene, n, n, n) or grids.dtype != np.uint8:
+        raise ValueError(
+            f"{path} holds {grids.shape} {grids.dtype}, not ({scenes}, {settings.per_scene}, {n}, {n}, {n}) uint8"
+        )
+    return grids

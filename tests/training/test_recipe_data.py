@@ -1,0 +1,175 @@
+"""Training data as scene recipes: generated through a real service, packed, verified, migrated
+from grid shards, rendered into observations and trained on."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from service.training.dataset import RenderedObservations, SceneDataset, load_scenes
+from service.training.observations import ObservationSettings, render_cache
+from service.training.recipe_shards import RecipeFolder, shard_arrays
+from service.training.shards import ShardFolder, sha256_of
+from vgn_data.dataset import RawDataset
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=600)
+
+
+def generate(url: str, out: Path, scenes: int, seed: int = 3) -> None:
+    done = run("-m", "client.cli", "generate-data", "--sim", "--url", url, "--scene", "pile", "--objects", "blocks",
+               "--scenes", str(scenes), "--points", "6", "--seed", str(seed), "--noise-fraction", "0.5",
+               "--renderer", "tiny", "--out", str(out))  # fmt: skip
+    assert done.returncode == 0, done.stderr
+
+
+def vgn_data(*args: str) -> subprocess.CompletedProcess:
+    return run("-m", "service.training.data_cli", *args)
+
+
+@pytest.fixture(scope="module")
+def raw(server, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("raw") / "pile"
+    generate(server.url, out, scenes=3)
+    return out
+
+
+def test_generation_writes_a_recipe_per_scene_and_packing_verifies(raw: Path, tmp_path: Path):
+    dataset = RawDataset(raw)
+    assert sorted(p.stem for p in dataset.recipes_dir.glob("*.npz")) == dataset.scene_ids()
+    data = tmp_path / "data"
+    packed = vgn_data("pack", str(raw), "--source", "pile", "--out", str(data))
+    assert packed.returncode == 0, packed.stderr
+    manifest = RecipeFolder(data).manifest()
+    assert (
+        manifest["format"] == 2
+        and manifest["gripper"]
+        and manifest["sources"]["pile"]["objects"] == ["builtin:"]
+    )
+    (entry,) = manifest["shards"]
+    assert entry["scenes"] == len(dataset.scene_ids()) and entry["sha256"] == sha256_of(data / entry["file"])
+    verified = vgn_data("verify", str(data), "--scenes", "10")
+    assert verified.returncode == 0, verified.stdout + verified.stderr
+    assert f"verified {entry['scenes']} scenes" in verified.stdout and "(100.0 %)" in verified.stdout
+    # Nothing new: no shard is written, none rewritten.
+    assert vgn_data("pack", str(raw), "--source", "pile", "--out", str(data)).returncode == 0
+    assert RecipeFolder(data).manifest()["shards"] == [entry]
+
+
+def test_new_scenes_go_into_a_new_shard_and_old_ones_stay(server, raw: Path, tmp_path: Path):
+    grown = tmp_path / "raw"
+    shutil.copytree(raw, grown)
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(grown), "--source", "pile", "--out", str(data)).returncode == 0
+    (first,) = RecipeFolder(data).manifest()["shards"]
+    generate(server.url, grown, scenes=4)
+    assert vgn_data("pack", str(grown), "--source", "pile", "--out", str(data)).returncode == 0
+    shards = RecipeFolder(data).manifest()["shards"]
+    assert shards[0] == first and len(shards) == 2 and shards[1]["first_scene"] == "s3-0000003"
+    assert sha256_of(data / first["file"]) == first["sha256"]
+
+
+def test_a_recipe_that_no_longer_matches_its_labels_fails_verification(raw: Path, tmp_path: Path):
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(raw), "--source", "pile", "--out", str(data)).returncode == 0
+    folder = RecipeFolder(data)
+    (shard,) = folder.load()
+    arrays = dict(shard.data)
+    arrays["object_pose"] = arrays["object_pose"].copy()
+    arrays["object_pose"][0, 1] += 0.02  # one object moved 2 cm: its labels are wrong now
+    manifest = folder.manifest()
+    manifest["shards"] = []
+    records = rebuild_records(arrays)
+    folder.append(manifest, "pile", records)
+    (data / shard.file).unlink()
+    result = vgn_data("verify", str(data), "--scenes", "10")
+    assert result.returncode == 1
+    assert f"mismatch: {shard.scene_ids[0]}: the rebuilt grid differs" in result.stdout
+
+
+def rebuild_records(arrays: dict[str, np.ndarray]) -> list:
+    """The records of a shard's arrays (the inverse of ``shard_arrays``), to write a changed copy."""
+    from service.training.recipe_shards import RecipeRecord, RecipeShard
+
+    shard = RecipeShard("pile", "x", arrays)
+    records = []
+    for row, labels in enumerate(shard.labels_by_scene()):
+        recipe = shard.recipe(row)
+        files = dict(
+            zip(
+                arrays["object_refs"],
+                zip(arrays["object_urdf_sha256"], arrays["object_mesh_sha256"], strict=True),
+                strict=True,
+            )
+        )
+        records.append(RecipeRecord(recipe.scene_id, {
+            "objects": np.asarray(recipe.objects), "urdf_sha256": np.asarray([files[r][0] for r in recipe.objects]),
+            "mesh_sha256": np.asarray([files[r][1] for r in recipe.objects]), "scales": recipe.scales,
+            "poses": recipe.poses, "views": recipe.views,
+            "noise_state": recipe.noise_state if recipe.noise_state is not None else np.zeros(0, np.uint64),
+            "side_view": np.asarray(recipe.side_view), "renderer": np.asarray(recipe.renderer)},
+            arrays["grid_digest"][row], labels))  # fmt: skip
+    assert shard_arrays(records)["grasps"].shape == arrays["grasps"].shape
+    return records
+
+
+def test_grid_shards_migrate_to_recipes_with_proof(raw: Path, tmp_path: Path):
+    grids = tmp_path / "data"
+    packed = run("-m", "service.training.pack", str(raw), "--source", "pile", "--out", str(grids))
+    assert packed.returncode == 0, packed.stderr
+    backup = tmp_path / "grids"
+    shutil.copytree(grids, backup)
+    stored = {
+        str(s): g
+        for shard in ShardFolder(grids).load()
+        for s, g in zip(shard.scene_ids, shard.grids, strict=True)
+    }
+    migrated = vgn_data("migrate", str(grids), "--work", str(tmp_path / "work"), "--objects", "pile=blocks",
+                        "--renderer", "tiny", "--finish")  # fmt: skip
+    assert migrated.returncode == 0, migrated.stderr
+    assert f"pile: {len(stored)} of {len(stored)} scenes converted" in migrated.stdout
+    manifest = RecipeFolder(grids).manifest()
+    assert manifest["format"] == 2 and manifest["migration"]["pile"]["converted"] == len(stored)
+    assert not list((grids / "shards").glob("pile-0*.npz.xz"))  # the grid shards are gone
+    verified = vgn_data("verify", str(grids), "--grids", str(backup))
+    assert verified.returncode == 0, verified.stdout
+    assert (
+        f"largest difference from the stored grid 0 / 255 ({len(stored)} scenes compared" in verified.stdout
+    )
+
+
+def test_training_draws_fresh_observations_from_the_cache(raw: Path, tmp_path: Path):
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(raw), "--source", "pile", "--out", str(data)).returncode == 0
+    settings = ObservationSettings(per_scene=3, noise_fraction=0.5)
+    cache = tmp_path / "cache"
+    (path,) = render_cache(data, cache, settings)
+    grids = np.load(path)
+    (shard,) = RecipeFolder(data).load()
+    assert grids.shape == (len(shard.scene_ids), 3, 40, 40, 40)
+    from service.training.recipe_grids import grid_digest
+
+    for row in range(len(shard.scene_ids)):  # slot 0 is the scene's original observation
+        np.testing.assert_array_equal(grid_digest(grids[row, 0]), shard.data["grid_digest"][row])
+        assert not np.array_equal(grids[row, 1], grids[row, 2])
+    assert render_cache(data, cache, settings) == [path]  # cached: nothing rendered again
+    scenes, (summary,) = load_scenes([data], 40, 2.0, cache, settings)
+    assert summary.scenes == len(scenes) >= 1 and isinstance(scenes[0].source, RenderedObservations)
+    fresh = SceneDataset(scenes, augment=None, seed=0, copies=8, fresh_observations=True)
+    seen = {fresh[i].grid.numpy().tobytes() for i in range(0, 8 * len(scenes), len(scenes))}
+    assert len(seen) >= 2
+    fixed = SceneDataset(scenes, augment=None, seed=0, copies=8)
+    assert len({fixed[i].grid.numpy().tobytes() for i in range(0, 8 * len(scenes), len(scenes))}) == 1
+    trained = run("-m", "service.training.cli", "--data", str(data), "--cache", str(cache), "--observations", "3",
+                  "--observation-noise", "0.5", "--epochs", "1", "--val-fraction", "0", "--out",
+                  str(tmp_path / "w.safetensors"), "--no-progress")  # fmt: skip
+    assert trained.returncode == 0, trained.stderr
+    card = json.loads((tmp_path / "w.card.json").read_text())
+    assert card["training"]["observations"]["per_scene"] == 3
