@@ -1,14 +1,20 @@
-"""Typed client for vgn-service: ``VGNClient`` / ``AsyncVGNClient`` and the shared schemas.
+"""Typed client for vgn-service: ``VGNClient`` / ``AsyncVGNClient``, ``GRPCClient`` and the
+shared schemas.
 
-Installs without torch, open3d or pybullet; ``connect(url)`` also gives the gRPC client for
-``grpc://`` URLs (with the ``grpc`` extra).
+Installs without torch, open3d or pybullet; ``GRPCClient`` (and ``connect(url)`` for
+``grpc://`` URLs) needs the ``grpc`` extra, which is imported only when it is first used.
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
 
 from client.connect import connect
 from client.http import (
     AsyncVGNClient,
     BadRequest,
     Conflict,
+    InvalidRequest,
     NotFound,
     PayloadTooLarge,
     ServiceUnavailable,
@@ -18,6 +24,10 @@ from client.http import (
 )
 from client.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
 
+if TYPE_CHECKING:
+    from client.grpc_client import GRPCClient as GRPCClient
+
+# GRPCClient is left out, so that ``from client import *`` works without the grpc extra.
 __all__ = [
     "AsyncVGNClient",
     "BadRequest",
@@ -26,6 +36,7 @@ __all__ = [
     "GraspQuery",
     "GraspResult",
     "Intrinsics",
+    "InvalidRequest",
     "NotFound",
     "PayloadTooLarge",
     "Pose",
@@ -37,3 +48,21 @@ __all__ = [
     "Workspace",
     "connect",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """``client.GRPCClient`` on first use: importing ``client`` must not need grpcio."""
+    if name != "GRPCClient":
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    try:
+        from client.grpc_client import GRPCClient
+    except ImportError as error:
+        raise ImportError(
+            f"GRPCClient needs the grpc extra ({error}): pip install 'vgn-service[grpc]'", name=name
+        ) from None
+    globals()["GRPCClient"] = GRPCClient  # later look-ups skip this function
+    return GRPCClient
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), "GRPCClient"])

@@ -15,6 +15,7 @@ takes ``--log-level`` (debug, info, warning, error): what the libraries report o
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import json
 import os
@@ -27,7 +28,8 @@ from pathlib import Path
 import httpx
 
 from client.connect import connect, is_grpc_url
-from client.http import DEFAULT_URL, VGNClient, VGNError
+from client.embedded import bind_error
+from client.http import DEFAULT_URL, InvalidRequest, VGNClient, VGNError
 from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
@@ -120,7 +122,8 @@ def _add_generate_data(commands: argparse._SubParsersAction[argparse.ArgumentPar
         help="label grasps in simulation through the service (VGN's raw dataset layout)",
         description="Generate training data as VGN: each scene gets a session, 1-6 random views are posted, "
         "the fused cloud with normals is read back, and 120 grasp points are labelled by trying 6 yaws each in "
-        "PyBullet. Output: DIR/setup.json, DIR/grasps.csv, DIR/scenes/<id>.npz. A rerun resumes.",
+        "PyBullet. Output: DIR/setup.json, DIR/grasps.csv, DIR/scenes/<id>.npz and each scene's recipe "
+        "(objects and settled poses) DIR/recipes/<id>.npz. A rerun resumes.",
     )
     _add_sim_options(gen)
     gen.add_argument("--scene", choices=["pile", "packed"], default="pile")
@@ -130,6 +133,8 @@ def _add_generate_data(commands: argparse._SubParsersAction[argparse.ArgumentPar
         help="object set ('blocks', 'pybullet') or URDF folder; repeat to mix (default: the scene's set)",
     )
     gen.add_argument("--scenes", type=int, default=10, help="scenes to generate (default %(default)s)")
+    gen.add_argument("--first", type=int, default=0,
+                     help="index of the first scene (default 0): scenes --first .. --first + --scenes - 1")  # fmt: skip
     gen.add_argument("--workers", type=int,
                      help="simulator processes (default 1; with --ray, one per CPU of the cluster)")  # fmt: skip
     gen.add_argument("--out", required=True, help="dataset folder (created or resumed)")
@@ -230,10 +235,30 @@ def _serve(args: argparse.Namespace) -> int:
         os.environ["VGN_GRPC_PORT"] = str(args.grpc_port)
     os.environ.setdefault("VGN_GRPC_HOST", args.host)
     grpc_port = os.environ.get("VGN_GRPC_PORT") or "50051"  # the service checks the value
-    grpc = f"gRPC on grpc://{os.environ['VGN_GRPC_HOST']}:{grpc_port}" if grpc_port != "0" else "gRPC off"
+    grpc_host = os.environ["VGN_GRPC_HOST"]
+    listeners = [("port", args.host, args.port, "--port")]
+    if grpc_port.isdigit() and grpc_port != "0":
+        listeners.append(
+            ("gRPC port", grpc_host, int(grpc_port), "--grpc-port, or --grpc-port 0 for no gRPC")
+        )
+    for problem in filter(None, (_listen_problem(*listener) for listener in listeners)):
+        print(f"error: {problem}", file=sys.stderr)
+        return 1
+    grpc = f"gRPC on grpc://{grpc_host}:{grpc_port}" if grpc_port != "0" else "gRPC off"
     print(f"serving HTTP on http://{args.host}:{args.port}, {grpc}", file=sys.stderr)
     uvicorn.run("service.app:app", host=args.host, port=args.port)
     return 0
+
+
+def _listen_problem(name: str, host: str, port: int, option: str) -> str | None:
+    """Why the service could not listen on ``host:port``, checked before it starts: otherwise
+    it loads the model first and then fails with a traceback from deep inside its start-up."""
+    error = bind_error(host, port)
+    if error is None:
+        return None
+    if error.errno == errno.EADDRINUSE:
+        return f"{name} {port} is in use on {host} (another vgn-client serve?): pick another with {option}"
+    return f"cannot listen on {host}:{port} ({error.strerror or error})"
 
 
 def _status(vgn: VGNClient) -> int:
@@ -393,6 +418,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if args.command == "view":
                 return _view(vgn, args)
             return _grasps(vgn, args)
+    except InvalidRequest as error:  # refused here, before anything was sent
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     except VGNError as error:
         detail = error.detail if isinstance(error.detail, str) else json.dumps(error.detail)
         print(f"error: the service answered {error.status}: {detail}", file=sys.stderr)

@@ -27,6 +27,20 @@ def free_port(host: str = "127.0.0.1") -> int:
         return probe.getsockname()[1]
 
 
+def bind_error(host: str, port: int) -> OSError | None:
+    """Why a server could not listen on ``host:port`` now (in use, not ours to take, no such
+    address), or None. Binds as uvicorn and gRPC do, with ``SO_REUSEADDR``, so a port that
+    only holds connections closing down (TIME_WAIT) counts as free, as it is for them."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    try:
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind((host.strip("[]"), port))
+    except OSError as error:
+        return error
+    return None
+
+
 class EmbeddedService:
     """A uvicorn child process serving ``service.app:app``; a context manager that stops it.
 

@@ -25,11 +25,9 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 from client.grpc_api import convert
 from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
-from client.http import _ERROR_TYPES, VGNError, as_pose, encode_depth
+from client.http import _ERROR_TYPES, VGNError, encode_depth, frame_meta, grasp_query
 from client.schemas import (
-    FrameMeta,
     FrameResult,
-    GraspQuery,
     GraspResult,
     Intrinsics,
     ModelInfo,
@@ -232,7 +230,7 @@ class GRPCClient:
     # Read-outs ----------------------------------------------------------------------------
     def grasps(self, session_id: str, **options: Any) -> GraspResult:
         """Ranked grasps; options are ``GraspQuery`` fields (threshold, max_grasps, planner, ...)."""
-        request = convert.grasp_query_message(session_id, GraspQuery(**options))
+        request = convert.grasp_query_message(session_id, grasp_query(options))
         return self._call(self._stub.GetGrasps, request, convert.grasp_result)
 
     def tsdf(self, session_id: str) -> np.ndarray:
@@ -271,8 +269,7 @@ def frame_message(
     max_depth: float,
 ) -> pb.Frame:
     """A frame checked as the HTTP client checks its ``meta``, with the same depth encoding."""
-    meta = FrameMeta(camera_pose=as_pose(camera_pose), intrinsics=intrinsics, depth_scale=depth_scale,
-                     max_depth=max_depth)  # fmt: skip
+    meta = frame_meta(camera_pose, intrinsics, depth_scale, max_depth)
     body, _, media_type = encode_depth(depth)
     return pb.Frame(
         session_id=session_id,

@@ -11,14 +11,16 @@ how they send a request. Neither needs torch, open3d or pybullet.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
 import httpx
 import numpy as np
+from pydantic import ValidationError
 
 from client.schemas import (
     FrameMeta,
@@ -49,6 +51,42 @@ class VGNError(Exception):
 
 class BadRequest(VGNError):
     """400/415/422: the request was malformed; nothing changed on the service."""
+
+
+class InvalidRequest(BadRequest, ValueError):
+    """Refused by the client before anything was sent, for what the service would refuse with
+    422 (``status``); ``field`` names the bad argument. Also a ``ValueError``, which these errors
+    were before they were typed."""
+
+    def __init__(self, field: str, problem: str) -> None:
+        super().__init__(422, f"{field}: {problem}")
+        self.field = field
+        self.args = (f"{field}: {problem}",)  # not "HTTP 422": nothing went over HTTP
+
+
+def invalid_request(error: ValidationError, name: str, of_arguments: bool = False) -> InvalidRequest:
+    """``InvalidRequest`` for a failed model check, named by where its first error lies: below
+    ``name``, or alone when the model's fields are the call's own arguments (``of_arguments``);
+    a rule of the whole model is named ``name``."""
+    first = error.errors()[0]
+    parts = first["loc"] if of_arguments else (name, *first["loc"])
+    problem = first["msg"].removeprefix("Value error, ")
+    if len(error.errors()) > 1:
+        problem += f" (and {len(error.errors()) - 1} more)"
+    return InvalidRequest(".".join(str(part) for part in parts) or name, problem)
+
+
+@contextlib.contextmanager
+def refused_as(name: str, of_arguments: bool = False) -> Iterator[None]:
+    """Turn a ``ValueError`` from checking ``name`` into ``InvalidRequest`` (see ``invalid_request``)."""
+    try:
+        yield
+    except InvalidRequest:
+        raise
+    except ValidationError as error:
+        raise invalid_request(error, name, of_arguments) from None
+    except ValueError as error:
+        raise InvalidRequest(name, str(error)) from None
 
 
 class Unauthorized(VGNError):
@@ -131,7 +169,7 @@ def encode_depth(depth: np.ndarray | bytes) -> tuple[bytes, str, str]:
         return bytes(depth), "depth.png", "image/png"
     array = np.asarray(depth)
     if array.ndim != 2:
-        raise ValueError(f"depth must be a 2-D (H, W) array, got shape {array.shape}")
+        raise InvalidRequest("depth", f"must be a 2-D (H, W) array, got shape {array.shape}")
     if array.dtype == np.uint16:
         try:
             from PIL import Image
@@ -141,8 +179,30 @@ def encode_depth(depth: np.ndarray | bytes) -> tuple[bytes, str, str]:
         Image.fromarray(array).save(buffer, format="PNG", compress_level=1)  # 2x faster, still ~5 KB
         return buffer.getvalue(), "depth.png", "image/png"
     if not np.issubdtype(array.dtype, np.floating):
-        raise ValueError(f"depth must be float metres or uint16 PNG units, got dtype {array.dtype}")
+        raise InvalidRequest("depth", f"must be float metres or uint16 PNG units, got dtype {array.dtype}")
     return np.ascontiguousarray(array, dtype="<f4").tobytes(), "depth.raw", "application/octet-stream"
+
+
+def frame_meta(
+    camera_pose: Pose | np.ndarray | dict,
+    intrinsics: Intrinsics | None,
+    depth_scale: float,
+    max_depth: float,
+) -> FrameMeta:
+    """A frame's meta, checked as the service checks it; ``InvalidRequest`` names what is wrong."""
+    with refused_as("camera_pose"):
+        pose = as_pose(camera_pose)
+    with refused_as("frame", of_arguments=True):
+        return FrameMeta(
+            camera_pose=pose, intrinsics=intrinsics, depth_scale=depth_scale, max_depth=max_depth
+        )
+
+
+def grasp_query(options: dict[str, Any]) -> GraspQuery:
+    """A grasp request's options, checked as the service checks them; ``InvalidRequest`` names
+    the option that is wrong."""
+    with refused_as("grasp query", of_arguments=True):
+        return GraspQuery(**options)
 
 
 #: Header carrying a frame's meta JSON when the body is the bare depth image.
@@ -170,12 +230,7 @@ class Calls:
         depth_scale: float = 1000.0,
         max_depth: float = 2.0,
     ) -> Call[FrameResult]:
-        meta = FrameMeta(
-            camera_pose=as_pose(camera_pose),
-            intrinsics=intrinsics,
-            depth_scale=depth_scale,
-            max_depth=max_depth,
-        )
+        meta = frame_meta(camera_pose, intrinsics, depth_scale, max_depth)
         body, _, media_type = encode_depth(depth)
         # The bare image as the body and the meta in a header: no multipart to build or parse.
         headers = {"Content-Type": media_type, FRAME_META_HEADER: meta.model_dump_json()}
@@ -188,12 +243,12 @@ class Calls:
 
     @staticmethod
     def grasps(session_id: str, **options: Any) -> Call[GraspResult]:
-        params = GraspQuery(**options).to_params()
+        params = grasp_query(options).to_params()
         return Call("GET", f"/sessions/{session_id}/grasps", _model(GraspResult), {"params": params})
 
     @staticmethod
     def view_page(session_id: str, refresh: float = 0.0, **options: Any) -> Call[str]:
-        params = {**GraspQuery(**options).to_params(), "refresh": refresh, "standalone": "true"}
+        params = {**grasp_query(options).to_params(), "refresh": refresh, "standalone": "true"}
         return Call("GET", f"/sessions/{session_id}/view", lambda r: r.text, {"params": params})
 
     @staticmethod
@@ -435,6 +490,7 @@ __all__ = [
     "AsyncVGNClient",
     "BadRequest",
     "Conflict",
+    "InvalidRequest",
     "NotFound",
     "PayloadTooLarge",
     "ServiceUnavailable",

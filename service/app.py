@@ -15,8 +15,9 @@ from typing import TYPE_CHECKING
 from fastapi import FastAPI
 from starlette.formparsers import MultiPartParser
 
+from service.api.docs import docs_urls, install_docs
 from service.api.errors import install_error_handlers
-from service.api.limits import BodySizeLimit
+from service.api.limits import MULTIPART_OVERHEAD, BodySizeLimit
 from service.api.metrics import RequestMetrics, ServiceMetrics
 from service.api.routes import api, health
 from service.api.viewer import viewer, viewer_assets
@@ -27,8 +28,6 @@ if TYPE_CHECKING:
     import grpc
 
 log = logging.getLogger("vgn.service")
-#: Bytes allowed beside the depth image in a frame upload (meta JSON, multipart headers).
-MULTIPART_OVERHEAD = 64 * 1024
 SWEEP_INTERVAL_S = 30.0
 
 
@@ -61,6 +60,7 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
         version="0.1.0",
         summary="Real-time 6-DOF grasp planning with the Volumetric Grasping Network",
         lifespan=lifespan,
+        **docs_urls(),
     )
     app.state.settings = settings
     app.state.core = core
@@ -70,7 +70,8 @@ def create_app(settings: Settings | None = None, core: PlanningService | None = 
     app.include_router(api)
     app.include_router(viewer)
     app.include_router(viewer_assets)
-    app.add_middleware(BodySizeLimit, max_bytes=settings.max_frame_bytes + MULTIPART_OVERHEAD)
+    install_docs(app)
+    app.add_middleware(BodySizeLimit, max_frame_bytes=settings.max_frame_bytes)
     # Starlette spools file parts over 1 MiB to disk; a 640x480 float32 frame is 1.2 MB.
     # Bodies are already capped above, so keep whole frames in memory (halves parsing time).
     MultiPartParser.spool_max_size = max(

@@ -64,7 +64,12 @@ class Settings(BaseSettings):
     )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")
-    max_frame_bytes: int = Field(default=32 * 1024 * 1024, ge=1024, description="largest request body")
+    max_frame_bytes: int = Field(
+        default=32 * 1024 * 1024,
+        ge=1024,
+        description="largest depth image in a frame upload, in bytes (413 beyond); a request body may be "
+        "64 KiB larger, for the frame's meta JSON and multipart headers",
+    )
     api_key: str | None = Field(default=None, description="when set, required as X-API-Key or Bearer token")
     grpc_port: int = Field(
         default=50051,

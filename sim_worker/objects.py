@@ -414,14 +414,15 @@ def vet_pybullet_data(data_path: Path | None = None) -> list[VettedObject]:
     """
     import pybullet
     import pybullet_data
-    from pybullet_utils.bullet_client import BulletClient
+
+    from sim_worker.world import QuietBulletClient
 
     root = Path(data_path or pybullet_data.getDataPath())
     candidates = [(name, True) for name in PYBULLET_NAMED if (root / name).exists()]
     candidates += [
         (path.relative_to(root).as_posix(), False) for path in sorted(root.glob(PYBULLET_RANDOM_GLOB))
     ]
-    p = BulletClient(connection_mode=pybullet.DIRECT)
+    p = QuietBulletClient(pybullet.DIRECT)  # connecting prints to stdout
     try:
         vetted = []
         for name, rescale in candidates:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import functools
 import logging
 import os
 import pkgutil
@@ -10,7 +12,7 @@ import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pybullet
@@ -25,10 +27,31 @@ WORKSPACE_SIZE = 0.30
 Renderer = Literal["auto", "egl", "tiny"]
 
 
+@functools.cache
+def _c_library() -> ctypes.CDLL | None:
+    """The C library this process runs on, for ``fflush``; None where there is none to ask."""
+    try:
+        return ctypes.CDLL(None)
+    except (OSError, TypeError):  # Windows takes no None here
+        return None
+
+
+def _flush_c_stdio() -> None:
+    """Write out what C code left in its stdio buffers. Into a pipe or file C's stdout is fully
+    buffered, so text printed while fd 1 was silenced would otherwise reach the real stdout
+    later, at the next flush or at exit."""
+    library = _c_library()
+    if library is not None:
+        library.fflush(None)
+
+
 @contextlib.contextmanager
 def _quiet_native_stdout() -> Iterator[None]:
-    """Silence what PyBullet's C code prints (the EGL plugin lists GL details on load and exit)."""
+    """Silence what PyBullet's C code prints on stdout (``argv[0]=`` on connect; the EGL plugin's
+    GL vendor whenever it makes its buffers, on load and exit), which would mix with a command's
+    own output."""
     sys.stdout.flush()
+    _flush_c_stdio()
     try:
         saved = os.dup(1)
     except OSError:  # no real stdout to silence
@@ -39,8 +62,30 @@ def _quiet_native_stdout() -> Iterator[None]:
         try:
             yield
         finally:
+            _flush_c_stdio()
             os.dup2(saved, 1)
             os.close(saved)
+
+
+class QuietBulletClient(BulletClient):
+    """A ``BulletClient`` whose connect and renders keep stdout clean. The EGL plugin makes its
+    buffers at the first render and again when a render is larger than any before it (or after a
+    reset), and prints the GL vendor each time, so every render is silenced, not only the first."""
+
+    def __init__(self, connection_mode: int = pybullet.DIRECT) -> None:
+        with _quiet_native_stdout():
+            super().__init__(connection_mode=connection_mode)
+
+    def __del__(self) -> None:
+        """Disconnect, silenced as ``World.close`` does, when a world is dropped without closing."""
+        if getattr(self, "_client", -1) >= 0:
+            with _quiet_native_stdout():
+                super().__del__()
+
+    def getCameraImage(self, *args: Any, **kwargs: Any) -> Any:
+        """``pybullet.getCameraImage`` on this client, with native stdout silenced."""
+        with _quiet_native_stdout():
+            return pybullet.getCameraImage(*args, physicsClientId=self._client, **kwargs)
 
 
 @dataclass(frozen=True)
@@ -75,7 +120,7 @@ class World:
 
     def __init__(self, config: PhysicsConfig = PhysicsConfig(), renderer: Renderer = "auto") -> None:
         self.config = config
-        self.p = BulletClient(connection_mode=pybullet.DIRECT)
+        self.p = QuietBulletClient(pybullet.DIRECT)
         self.egl = renderer in ("egl", "auto") and self._load_egl(required=renderer == "egl")
         self.objects: dict[int, SimObject] = {}
         self._set_up()

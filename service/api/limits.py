@@ -7,27 +7,38 @@ import json
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+#: Bytes a request body may hold beside a depth image of ``VGN_MAX_FRAME_BYTES``: the frame's
+#: meta JSON and the multipart headers. ``VGN_MAX_FRAME_BYTES`` itself bounds the depth image.
+MULTIPART_OVERHEAD = 64 * 1024
+
 
 class BodyTooLarge(HTTPException):
     """Raised from ``receive`` when a streamed body passes the limit. An HTTPException, so
     FastAPI's body parsing passes it through instead of turning it into a 400."""
 
-    def __init__(self, size: int, limit: int) -> None:
-        super().__init__(413, too_large_message(size, limit))
+    def __init__(self, size: int, max_frame_bytes: int) -> None:
+        super().__init__(413, too_large_message(size, max_frame_bytes))
 
 
-def too_large_message(size: int, limit: int) -> str:
-    """The 413 detail, the same whether the size was declared or counted."""
-    return f"request body of {size}+ bytes exceeds the limit of {limit} bytes (VGN_MAX_FRAME_BYTES)"
+def too_large_message(size: int, max_frame_bytes: int) -> str:
+    """The 413 detail, the same whether the size was declared or counted. It spells out the sum,
+    so the limit it names is not mistaken for a different ``VGN_MAX_FRAME_BYTES``."""
+    return (
+        f"request body of {size}+ bytes exceeds the limit of {max_frame_bytes + MULTIPART_OVERHEAD} bytes: "
+        f"VGN_MAX_FRAME_BYTES={max_frame_bytes} for the depth image plus {MULTIPART_OVERHEAD} for the "
+        "frame's meta and multipart headers"
+    )
 
 
 class BodySizeLimit:
-    """ASGI middleware: 413 when ``Content-Length`` exceeds ``max_bytes``, or when a body
-    without one (chunked) grows past it while it is read."""
+    """ASGI middleware: 413 when ``Content-Length`` exceeds ``max_frame_bytes`` plus
+    ``MULTIPART_OVERHEAD``, or when a body without one (chunked) grows past that while it is read.
+    The depth image's own limit, ``max_frame_bytes``, is checked where the frame is parsed."""
 
-    def __init__(self, app: ASGIApp, max_bytes: int) -> None:
+    def __init__(self, app: ASGIApp, max_frame_bytes: int) -> None:
         self.app = app
-        self.max_bytes = max_bytes
+        self.max_frame_bytes = max_frame_bytes
+        self.max_bytes = max_frame_bytes + MULTIPART_OVERHEAD
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """Check the declared length up front, then count the body as the app reads it."""
@@ -47,7 +58,7 @@ class BodySizeLimit:
             if message["type"] == "http.request":
                 received += len(message.get("body", b""))
                 if received > self.max_bytes:
-                    raise BodyTooLarge(received, self.max_bytes)
+                    raise BodyTooLarge(received, self.max_frame_bytes)
             return message
 
         async def tracking_send(message: Message) -> None:
@@ -62,7 +73,7 @@ class BodySizeLimit:
                 await self._reject(send, received)
 
     async def _reject(self, send: Send, size: int) -> None:
-        body = json.dumps({"detail": too_large_message(size, self.max_bytes)}).encode()
+        body = json.dumps({"detail": too_large_message(size, self.max_frame_bytes)}).encode()
         await send(
             {
                 "type": "http.response.start",
