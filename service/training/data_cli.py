@@ -5,6 +5,7 @@
     vgn-data render data --per-scene 8 --out ~/vgn-cache  fresh observations for training, cached
     vgn-data migrate data --work ~/vgn-data/migration --objects pile=DIR,DIR --objects packed=DIR
     vgn-data pack RAW --source pile --out data            new raw scenes (with recipes) as shards
+    vgn-data legacy-grids data --out DIR                  the grid shards a migration replaced, from git history
 
 VGN's object sets are found through ``--vgn-objects`` or ``$VGN_OBJECTS`` (the folder holding
 ``pile/``, ``packed/`` and ``blocks/``); see data/README.md.
@@ -87,6 +88,15 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--workers", type=int, default=1)
     render.add_argument("--vgn-objects", help="folder of VGN's object sets (default $VGN_OBJECTS)")
 
+    legacy = commands.add_parser(
+        "legacy-grids",
+        help="write the grid shards a migration removed (from the repository's history) to a folder",
+    )
+    legacy.add_argument("data", type=Path)
+    legacy.add_argument(
+        "--out", type=Path, required=True, help="folder for the grid shards (vgn-train --data OUT)"
+    )
+
     show = commands.add_parser("show", help="what a data folder holds")
     show.add_argument("data", type=Path)
     return parser
@@ -148,6 +158,20 @@ def _render(args: argparse.Namespace) -> int:
         else ""
     )
     print(f"{len(paths)} cache files in {out} (settings {settings.key()}){rendered}")
+    return 0
+
+
+def _legacy_grids(args: argparse.Namespace) -> int:
+    from service.training.recipe_shards import RecipeFolder
+    from service.training.verify_recipes import grids_from_history
+
+    migration = RecipeFolder(args.data).manifest().get("migration", {})
+    files = [name for record in migration.values() for name in record.get("grid_shards", [])]
+    if not files:
+        raise ValueError(f"{args.data} records no migrated grid shards")
+    if grids_from_history(args.data, files, args.out) is None:
+        raise ValueError(f"the grid shards are not in the git history of {args.data}")
+    print(f"{len(files)} grid shards in {args.out}: vgn-train --data {args.out} trains on their stored grids")
     return 0
 
 
@@ -225,9 +249,14 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
     try:
-        return {"migrate": _migrate, "verify": _verify, "pack": _pack, "render": _render, "show": _show}[
-            args.command
-        ](args)
+        return {
+            "migrate": _migrate,
+            "verify": _verify,
+            "pack": _pack,
+            "render": _render,
+            "legacy-grids": _legacy_grids,
+            "show": _show,
+        }[args.command](args)
     except (ValueError, FileNotFoundError, ShardError, RecipeError) as error:
         print(f"vgn-data: {error}", file=sys.stderr)
         return 2

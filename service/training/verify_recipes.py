@@ -58,9 +58,10 @@ def check_object_files(shards: list[RecipeShard], roots: dict[str, Path]) -> lis
     return problems
 
 
-def grids_from_history(folder: Path, files: list[str]) -> ShardFolder | None:
-    """The grid shards a migration replaced, taken from the git history of ``folder`` into a
-    temporary folder (the last commit that still had them); None outside a repository."""
+def grids_from_history(folder: Path, files: list[str], out: Path | None = None) -> ShardFolder | None:
+    """The grid shards a migration replaced, taken from the git history of ``folder`` (the last
+    commit that still had them) into ``out`` (default: a temporary folder) with a manifest of
+    their own; None outside a repository or when the history lacks them."""
     import json
     import tempfile
 
@@ -69,7 +70,7 @@ def grids_from_history(folder: Path, files: list[str]) -> ShardFolder | None:
 
     try:
         prefix = git("rev-parse", "--show-prefix").decode().strip()
-        out = Path(tempfile.mkdtemp(prefix="vgn-grid-shards-"))
+        out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="vgn-grid-shards-"))
         manifest = None
         for name in files:
             path = f"{prefix}{name}"
@@ -82,7 +83,7 @@ def grids_from_history(folder: Path, files: list[str]) -> ShardFolder | None:
     except (subprocess.CalledProcessError, FileNotFoundError, ValueError):
         return None
     manifest["shards"] = [s for s in manifest["shards"] if s["file"] in files]
-    (out / "manifest.json").write_text(json.dumps(manifest))
+    (out / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
     return ShardFolder(out)
 
 
