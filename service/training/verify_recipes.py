@@ -65,21 +65,22 @@ def grids_from_history(folder: Path, files: list[str], out: Path | None = None) 
     import json
     import tempfile
 
-    def git(*args: str) -> bytes:
-        return subprocess.run(["git", "-C", str(folder), *args], capture_output=True, check=True).stdout
+    def git(*args: str, where: Path = Path(folder)) -> bytes:
+        return subprocess.run(["git", "-C", str(where), *args], capture_output=True, check=True).stdout
 
     try:
         prefix = git("rev-parse", "--show-prefix").decode().strip()
+        top = Path(git("rev-parse", "--show-toplevel").decode().strip())
         out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="vgn-grid-shards-"))
         manifest = None
         for name in files:
             path = f"{prefix}{name}"
-            removed = git("log", "-1", "--format=%H", "--diff-filter=D", "--", path).decode().strip()
+            removed = git("log", "-1", "--format=%H", "--diff-filter=D", "--", path, where=top).decode().strip()
             revision = f"{removed}^" if removed else "HEAD"
             (out / name).parent.mkdir(parents=True, exist_ok=True)
-            (out / name).write_bytes(git("show", f"{revision}:{path}"))
+            (out / name).write_bytes(git("show", f"{revision}:{path}", where=top))
             if manifest is None:
-                manifest = json.loads(git("show", f"{revision}:{prefix}manifest.json"))
+                manifest = json.loads(git("show", f"{revision}:{prefix}manifest.json", where=top))
     except (subprocess.CalledProcessError, FileNotFoundError, ValueError):
         return None
     manifest["shards"] = [s for s in manifest["shards"] if s["file"] in files]
