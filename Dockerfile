@@ -11,6 +11,8 @@ COPY pyproject.toml README.md ./
 COPY client client
 COPY service service
 COPY sim_worker sim_worker
+# vgn-train, vgn-pack-data and vgn-data are installed with the package; training/ is what they run.
+COPY training training
 COPY vgn_data vgn_data
 # torch==2.13.0 is pinned in pyproject.toml; the CPU index keeps the CUDA stack out of the image.
 RUN pip install --no-cache-dir --extra-index-url https://download.pytorch.org/whl/cpu ".[service]"

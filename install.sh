@@ -50,9 +50,10 @@ fi
 # and installed). torch is pinned (==2.13.0): where pip is configured with a local CPU wheel
 # (find-links, as on our development machines) it takes that; elsewhere add
 # PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu to get the CPU build, not CUDA.
-# ray and runtimes: the --ray tests and the runtime comparison's tests run in CI too.
+# ray and runtimes: the --ray tests and the runtime comparison's tests run in CI too; docs: CI
+# builds the documentation site (mkdocs build --strict).
 if [ "$dev" = 1 ]; then
-  lock=requirements/full.txt extras=all,dev,ray,runtimes
+  lock=requirements/full.txt extras=all,dev,docs,ray,runtimes
 else
   lock=requirements/main.txt extras=service,sim
 fi

@@ -9,12 +9,17 @@ packed. Every (planner, selection, scenario) gets its own results folder under `
 an interrupted benchmark resumes and more ``--rounds`` extend it. The table (success rate and
 percent cleared with 95 % Wilson intervals, planning time) is printed and written to
 ``--out``/table.md and table.json, and drawn as a bar chart in table.png.
+
+The grasps asked for are the service's default answer: turn-averaged (VGN) and clearance-checked
+unless its operator turned these off; ``--no-turn-average --no-clearance`` gives the plain
+answer the paper measures. What was used names the folders and labels the rows.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import datetime
 import json
 import sys
 from collections.abc import Iterator
@@ -22,10 +27,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from benchmarks.chart import write_chart
+from benchmarks.report import this_machine
 from client.embedded import EmbeddedService
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
-from sim_worker.clear_scene import resolve_planner
+from sim_worker.clear_scene import resolve_planner, service_default, service_runtime
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
@@ -76,20 +82,25 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
-    parser.add_argument("--noise", action="store_true", help="depth noise on every view (a real sensor)")
+    parser.add_argument("--noise", action="store_true", help="Dex-Net depth noise on every view (a real sensor)")
+    parser.add_argument("--sensor", choices=["dex", "structured-light"],
+                        help="a depth sensor's errors on every view (docs/sensors.md); results go to folders ending in "
+                        "-dex or -structured-light")  # fmt: skip
+    parser.add_argument("--pose-error", action="store_true",
+                        help="each view's camera pose reported with a random error (5 mm, 1 degree); folders end in -pose")  # fmt: skip
     parser.add_argument(
         "--clearance",
-        action="store_true",
-        help="ask for grasps whose open hand clears the observed surface on its approach; rows are "
-        "labelled PLANNER+clearance and results go to folders ending in -clearance",
+        action=argparse.BooleanOptionalAction,
+        help="grasps whose open hand clears the observed surface on its approach, or not (default: the "
+        "service's, on unless its operator turned it off); checked rows are labelled PLANNER+clearance and "
+        "their results go to folders ending in -clearance",
     )
     parser.add_argument(
         "--turn-average",
         action=argparse.BooleanOptionalAction,
-        default=False,
-        help="VGN scores and orientations averaged over four quarter turns of the grid (default: off, as the "
-        "service answers requests that do not say); its rows are labelled vgn+turns and results go to folders "
-        "ending in -turns (the antipodal planner is unaffected)",
+        help="VGN scores and orientations averaged over four quarter turns of the grid, or not (default: the "
+        "service's, on unless its operator turned it off); averaged rows are labelled vgn+turns and their "
+        "results go to folders ending in -turns (the antipodal planner is unaffected)",
     )
     parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
@@ -118,6 +129,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def with_service_defaults(args: argparse.Namespace, runtime: dict | None) -> argparse.Namespace:
+    """``args`` with ``--clearance`` and ``--turn-average`` left out replaced by the service's
+    defaults: what its ``/model`` ``runtime`` reports or, with no service to ask (``--report``),
+    what one started here would use (the ``VGN_*`` environment, else the settings' defaults).
+    Folder names and row labels then say what the runs used."""
+    if runtime is None:
+        from service.settings import Settings
+
+        runtime = Settings().model_dump(include={"clearance", "turn_average"})
+    resolved = {switch: service_default(getattr(args, switch), runtime, switch)
+                for switch in ("clearance", "turn_average")}  # fmt: skip
+    return argparse.Namespace(**{**vars(args), **resolved})
+
+
 def scenario_config(args: argparse.Namespace, planner: str, selection: str, scenario: str) -> ClutterConfig:
     """The clutter-removal settings of one run: ``scenario`` is
     SCENE-COUNT, and each planner gets its own threshold option."""
@@ -127,7 +152,8 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
         threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection,
         planner=planner, renderer=args.renderer, noise=args.noise, views=args.views, clearance=args.clearance,
-        turn_average=args.turn_average and planner == "vgn",
+        sensor=args.sensor, pose_error=args.pose_error,
+        turn_average=args.turn_average if planner == "vgn" else False,
     )  # fmt: skip
 
 
@@ -137,6 +163,7 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
         for selection in args.selections:
             for scenario in args.scenarios:
                 suffix = ("-noise" if args.noise else "") + ("-side" if args.views == "side" else "")
+                suffix += (f"-{args.sensor}" if args.sensor else "") + ("-pose" if args.pose_error else "")
                 suffix += "-turns" if args.turn_average and planner == "vgn" else ""
                 suffix += "-clearance" if args.clearance else ""
                 yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}{suffix}"
@@ -174,7 +201,12 @@ def run_all(
                 summary = episode.run()
             finally:
                 episode.close()
-        rows.append(table_row(planner, selection, scenario, config.as_json(), summary))
+        rows.append(
+            {
+                **table_row(planner, selection, scenario, config.as_json(), summary),
+                "measured": measured_on(folder, record=True),
+            }
+        )
         print(
             f"{planner:9s} {selection:6s} {scenario:9s} {format_row(rows[-1])}", file=sys.stderr, flush=True
         )
@@ -191,8 +223,27 @@ def report_all(args: argparse.Namespace) -> list[dict]:
         results = ResultsFolder(folder, config)
         rows.append(
             table_row(planner, selection, scenario, config, summarize(results.rounds, results.grasps))
+            | {"measured": measured_on(folder)}
         )
     return rows
+
+
+def measured_on(folder: Path, record: bool = False) -> dict:
+    """When and where a results folder's rounds ran, as its ``measured.json`` says: with ``record``
+    (this process ran them) today's date (UTC) and this machine's CPU model and core count are
+    written there first. A folder from before that was recorded gets its rounds.csv's date and no machine."""
+    path = folder / "measured.json"
+    if record:
+        write_atomically(path, json.dumps(this_machine()) + "\n")
+    if path.is_file():
+        return json.loads(path.read_text())
+    rounds = folder / "rounds.csv"
+    when = (
+        datetime.datetime.fromtimestamp(rounds.stat().st_mtime, datetime.timezone.utc)
+        if rounds.is_file()
+        else None
+    )
+    return {"date": when.date().isoformat() if when else None, "cpu": None, "cores": None}
 
 
 def no_results(out: Path) -> int:
@@ -200,7 +251,8 @@ def no_results(out: Path) -> int:
     held = sorted(config.parent.name for config in out.glob("*/config.json"))
     print(
         f"no results for these options in {out}, table left as it was"
-        + (f"; it holds {', '.join(held)} (a folder suffix -noise, -side, -turns or -clearance needs that option)"
+        + (f"; it holds {', '.join(held)} (a folder suffix -noise or -side needs that option; one without "
+           "-turns or -clearance needs --no-turn-average or --no-clearance, unless the defaults are off)"
            if held else ""),
         file=sys.stderr,
     )  # fmt: skip
@@ -228,7 +280,8 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     """The results beside the paper's VGN and GPD figures, as a Markdown table with a line on the settings."""
     lines = [
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
-        f"{args.views} view(s){', depth noise' if args.noise else ''}",
+        f"{args.views} view(s){', depth noise' if args.noise else ''}"
+        f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
         "| failures: approach contact / nothing held / slipped / collision | planning p50 ms | paper VGN ε=0.9 | paper GPD |",
@@ -254,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     if args.report:
-        rows = report_all(args)
+        rows = report_all(with_service_defaults(args, None))
         if not rows:  # never replace a table with an empty one: the options likely do not match
             return no_results(args.out)
         return write_table(rows, args)
@@ -276,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
         if "vgn" in args.planners and not readiness.ready:
             print(f"error: the vgn planner cannot run: {readiness.detail} (pass --model)", file=sys.stderr)
             return 2
-        rows = run_all(args, vgn)
+        rows = run_all(with_service_defaults(args, vgn.model().runtime or {}), vgn)
     return write_table(rows, args)
 
 
@@ -292,12 +345,13 @@ def run_on_ray(args: argparse.Namespace) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     try:
-        ready, detail, _ = pool.prepare(
-            scenario_config(args, "antipodal", "best", args.scenarios[0]), resolve_planner
+        ready, detail, runtime = pool.prepare(
+            scenario_config(args, "antipodal", "best", args.scenarios[0]), service_runtime
         )
         if "vgn" in args.planners and not ready:
             print(f"error: the vgn planner cannot run: {detail} (pass --model)", file=sys.stderr)
             return 2
+        args = with_service_defaults(args, runtime)
         from tqdm import tqdm
 
         with tqdm(total=args.rounds * len(list(combinations(args))), unit="round", file=sys.stderr) as bar:

@@ -22,8 +22,9 @@ One run measures the p50 and p95 latency (milliseconds) of
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
-   (a single pass, unless ``VGN_TURN_AVERAGE=true``), and the other way (``turn_average`` set
-   to the opposite; its ratio to the default, paired);
+   (turn-averaged and clearance-checked, unless ``VGN_TURN_AVERAGE=false`` or
+   ``VGN_CLEARANCE=false``), and the other way (``turn_average=false&clearance=false``, VGN's
+   plain answer, or both true when the default is plain; its ratio to the default, paired);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
    so that each runs the network, by default and the other way; and without new frames, when the
    service answers from the session's last network output;
@@ -99,7 +100,7 @@ import torch
 
 from client.embedded import EmbeddedService
 from client.http import FRAME_META_HEADER, VGNClient, encode_depth
-from client.schemas import FrameMeta, GraspQuery, Pose, SessionCreate
+from client.schemas import SWITCHES, FrameMeta, GraspQuery, Pose, SessionCreate
 from service.core import PlanningService
 from service.planner import resolve_device, resolve_precision
 from service.runtime import configured_threads
@@ -152,9 +153,23 @@ FORWARD_DETECTION = "forward + detection"
 PLAN = "PlanningService.plan (service default)"
 
 
-def other_way(operation: str, default_turns: bool) -> str:
-    """The name of ``operation`` asked the other way than the service's default."""
-    return f"{operation.split(' (')[0]}, turn_average={'false' if default_turns else 'true'}"
+def service_defaults(runtime: dict[str, Any]) -> dict[str, bool]:
+    """What a grasp request that does not say gets, from the service's ``/model`` runtime (a
+    service that does not report a switch does not apply it)."""
+    return {switch: bool(runtime.get(switch)) for switch in SWITCHES}
+
+
+def other_options(defaults: dict[str, bool]) -> dict[str, bool]:
+    """The grasp options of the other way than the service's default: VGN's plain answer when
+    the default turns on anything, else every switch on (the service's best answer)."""
+    other = not any(defaults.values())
+    return {switch: other for switch in defaults}
+
+
+def other_way(operation: str, options: dict[str, bool]) -> str:
+    """The name of ``operation`` asked with ``options`` (the other way than the service's default)."""
+    asked = ", ".join(f"{switch}={'true' if on else 'false'}" for switch, on in options.items())
+    return f"{operation.split(' (')[0]}, {asked}"
 
 
 # Measurement -------------------------------------------------------------------------------
@@ -519,14 +534,15 @@ def http_grasp_operation(
     name: str = GRASPS_HTTP,
     group: str = "6 grasps HTTP",
     new_frame: bool = True,
-    turn_average: bool | None = None,
+    switches: dict[str, bool] | None = None,
 ) -> tuple[Operation, int]:
     """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
     ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
-    the network; without, the service answers from its last network output. ``turn_average``
-    ``None`` leaves the choice to the service's default, as a plain client does."""
+    the network; without, the service answers from its last network output. ``switches``
+    ``None`` leaves turn averaging and the clearance check to the service's default, as a plain
+    client does."""
     session_id = fused_session(client, frames)
-    options = {"threshold": THRESHOLD, "turn_average": turn_average}
+    options = {"threshold": THRESHOLD, **(switches or {})}
     grasps = len(client.grasps(session_id, **options).grasps)
     n = len(frames)
 
@@ -539,7 +555,7 @@ def http_grasp_operation(
         name,
         group,
         lambda k: client.grasps(session_id, **options),
-        "target" if new_frame and turn_average is None else "",
+        "target" if new_frame and switches is None else "",
         post_frame if new_frame else None,
     )
     return operation, grasps
@@ -814,15 +830,13 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         )
         network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
-        default_turns = bool(runtime.get("turn_average"))
-        other_query = GraspQuery(threshold=THRESHOLD, turn_average=not default_turns)
-        plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, default_turns))
+        other = other_options(service_defaults(runtime))
+        other_query = GraspQuery(threshold=THRESHOLD, **other)
+        plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, other))
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
-        grasps_other, _ = http_grasp_operation(
-            client, frames, other_way(GRASPS_HTTP, default_turns), turn_average=not default_turns
-        )
+        grasps_other, _ = http_grasp_operation(client, frames, other_way(GRASPS_HTTP, other), switches=other)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
@@ -844,7 +858,7 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
     for default in (PLAN, GRASPS_HTTP):
-        row = find(rows, other_way(default, default_turns))
+        row = find(rows, other_way(default, other))
         row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"
     bare = find(rows, FRAME_HTTP_BARE).p50
     find(rows, FRAME_HTTP).note += f" ({find(rows, FRAME_HTTP).p50 / bare:.2f}x the bare upload)"

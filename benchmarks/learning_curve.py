@@ -110,8 +110,8 @@ def bench_folder(out: Path, size: int) -> Path:
 
 def train_size(out: Path, size: int, train_argv: list[str]) -> None:
     """Train (or continue training) the model of one size; a finished run only rewrites its card."""
-    from service.training.checkpoint import checkpoint_path
-    from service.training.cli import main as train_main
+    from training.checkpoint import checkpoint_path
+    from training.cli import main as train_main
 
     weights = weights_path(out, size)
     weights.parent.mkdir(parents=True, exist_ok=True)

@@ -21,9 +21,9 @@ import torch
 
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
-from service.training.dataset import load_scenes, split_scenes
-from service.training.metrics import rotation_error_deg
-from service.training.train import TrainConfig
+from training.dataset import load_scenes, split_scenes
+from training.metrics import rotation_error_deg
+from training.train import TrainConfig
 
 THRESHOLDS = (0.7, 0.8, 0.9)
 

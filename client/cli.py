@@ -35,8 +35,21 @@ from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
 
 TURN_AVERAGE_HELP = (
     "score and orient grasps by the network's outputs averaged over four quarter turns of the grid, or not "
-    "(VGN only; default: the service's, off unless its operator turned it on)"
+    "(VGN only; default: the service's, on unless its operator turned it off)"
 )
+CLEARANCE_HELP = (
+    "drop grasps whose open hand would touch the observed surface on its approach, or not "
+    "(default: the service's, on unless its operator turned it off)"
+)
+
+
+def _add_switches(parser: argparse.ArgumentParser, recorded: str = "") -> None:
+    """``--clearance/--no-clearance`` and ``--turn-average/--no-turn-average``; left out, each is
+    ``None``: the service's default, which is its best answer."""
+    parser.add_argument("--clearance", action=argparse.BooleanOptionalAction, help=CLEARANCE_HELP + recorded)
+    parser.add_argument(
+        "--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP + recorded
+    )
 
 
 def _add_connection(parser: argparse.ArgumentParser) -> None:
@@ -79,12 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
-    grasps.add_argument(
-        "--clearance",
-        action="store_true",
-        help="drop grasps whose open hand would touch the observed surface on its approach",
-    )
-    grasps.add_argument("--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP)
+    _add_switches(grasps)
 
     view = commands.add_parser(
         "view",
@@ -104,8 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--crop-max", help="'x,y,z' upper crop corner, workspace frame, metres")
     view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
     view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
-    view.add_argument("--clearance", action="store_true", help="only grasps whose approach is clear")
-    view.add_argument("--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP)
+    _add_switches(view)
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -201,19 +208,18 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
         default="best",
         help="execute the best grasp, or a random one above threshold (as the paper)",
     )
-    clear.add_argument("--noise", action="store_true", help="add depth noise (robustness runs)")
+    clear.add_argument(
+        "--noise", action="store_true", help="Dex-Net depth noise on every view (robustness runs)"
+    )
+    clear.add_argument("--sensor", choices=["dex", "structured-light"],
+                       help="a depth sensor's errors on every view: Dex-Net noise, or a structured-light camera's "
+                       "(distance-squared noise, shadows, dropouts at edges and steep surfaces, flying pixels, 1 mm "
+                       "steps); see docs/sensors.md")  # fmt: skip
+    clear.add_argument("--pose-error", action="store_true",
+                       help="report each view's camera pose with a random error (5 mm, 1 degree), as a real arm would")  # fmt: skip
     clear.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn",
                        help="the VGN network, or the service's geometric antipodal baseline (no model needed)")  # fmt: skip
-    clear.add_argument(
-        "--clearance",
-        action="store_true",
-        help="ask for grasps whose open hand clears the observed surface on its approach (recorded in config.json)",
-    )
-    clear.add_argument(
-        "--turn-average",
-        action=argparse.BooleanOptionalAction,
-        help=TURN_AVERAGE_HELP + " (what was used is recorded in config.json)",
-    )
+    _add_switches(clear, " (what was used is recorded in config.json)")
     clear.add_argument(
         "--results",
         help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",
@@ -317,13 +323,11 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
             "crop_max",
             "approach",
             "max_approach_angle",
+            "clearance",
+            "turn_average",
         )
         if getattr(args, name) is not None
     }
-    if args.clearance:
-        options["clearance"] = True
-    if args.turn_average is not None:
-        options["turn_average"] = args.turn_average
     try:
         page = vgn.view_page(args.session_id, **options)
     except ValueError as error:  # the options broke GraspQuery's rules before anything was sent
@@ -345,6 +349,9 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
 
 #: The simulator commands live in sim_worker (they import pybullet); this is where each one runs.
 SIM_COMMANDS = {"clear-scene": "sim_worker.clear_scene", "generate-data": "sim_worker.generate_data"}
+#: The dataset commands belong to vgn_data (which builds on this package, so it is never imported
+#: here); numpy only, so they run on the light install too.
+DATA_COMMANDS = {"clean-data": "vgn_data.clean_data"}
 
 
 def _run_sim_command(args: argparse.Namespace) -> int:
@@ -392,16 +399,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _serve(args)
     if args.command in SIM_COMMANDS:
         return _run_sim_command(args)
-    if args.command == "clean-data":
-        from vgn_data.dataset import clean_and_balance
-
-        try:
-            kept = clean_and_balance(Path(args.source), Path(args.destination), seed=args.seed)
-        except (ValueError, FileNotFoundError) as error:
-            print(f"error: {error}", file=sys.stderr)
-            return 2
-        print(f"wrote {args.destination}: {kept} grasps")
-        return 0
+    if args.command in DATA_COMMANDS:
+        return importlib.import_module(DATA_COMMANDS[args.command]).run(args)
     if args.command == "view" and is_grpc_url(args.url):
         print(
             "error: the session viewer is an HTML page served over HTTP only; give the service's "

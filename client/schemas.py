@@ -34,6 +34,9 @@ VGN_DEFAULT_THRESHOLD = 0.9
 #: scores ~0.95, a side grasp ~0.85), and everything it returns already passed its antipodal and
 #: collision checks, so the threshold only drops poorly opposed contacts.
 ANTIPODAL_DEFAULT_THRESHOLD = 0.5
+#: The grasp query's on/off options; unset, each is the service's default (on unless its operator
+#: turned it off), so a client that sets one sends it either way.
+SWITCHES = ("clearance", "turn_average")
 
 
 class _Model(BaseModel):
@@ -264,11 +267,13 @@ class GraspQuery(_Model):
         le=180.0,
         description="degrees between a grasp's approach and `approach`; only with approach",
     )
-    clearance: bool = Field(
-        default=False,
+    clearance: bool | None = Field(
+        default=None,
         description="drop grasps whose open hand (fingers at the 0.08 m maximum opening and palm, "
         "franka-v2 dimensions) would touch the observed surface while approaching from 5 cm back "
-        "along the approach; applies to both planners, before max_grasps",
+        "along the approach; applies to both planners, before max_grasps; about 3 ms. Unset: the "
+        "service's default (VGN_CLEARANCE, on unless the operator turned it off; /model runtime says); "
+        "false gives the planner's unchecked grasps",
     )
     turn_average: bool | None = Field(
         default=None,
@@ -276,7 +281,8 @@ class GraspQuery(_Model):
         "turned by 0, 90, 180 and 270 degrees about the workspace z axis (the turns VGN trains "
         "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 2x the "
         "time of a plain request on 2 CPU cores; widths stay those of the unturned grid. Unset: the "
-        "service's default (VGN_TURN_AVERAGE, off unless the operator turned it on; /model runtime says)",
+        "service's default (VGN_TURN_AVERAGE, on unless the operator turned it off; /model runtime says); "
+        "false gives VGN's plain answer",
     )
 
     @field_validator("crop_min", "crop_max", "approach", mode="before")
@@ -313,12 +319,12 @@ class GraspQuery(_Model):
         return _parse_vector3("approach", self.approach)
 
     def to_params(self) -> dict[str, Any]:
-        """Query parameters for the request, the options left unset (and switches when off) omitted."""
+        """Query parameters for the request, the options left unset omitted; a switch that is set
+        is sent on or off, since unset means the service's default."""
         params = self.model_dump(exclude_none=True)
-        if params.pop("clearance"):
-            params["clearance"] = "true"
-        if "turn_average" in params:  # unset means the service's default, so off is sent too
-            params["turn_average"] = "true" if params["turn_average"] else "false"
+        for switch in SWITCHES:
+            if switch in params:
+                params[switch] = "true" if params[switch] else "false"
         return params
 
 
@@ -348,7 +354,7 @@ class GraspResult(_Model):
     model: str = Field(description="id of the weights that planned these grasps, or 'antipodal'")
     threshold: float = Field(description="the quality threshold these grasps passed")
     clearance_dropped: int | None = Field(
-        default=None, description="grasps the clearance check dropped; null when it was not asked for"
+        default=None, description="grasps the clearance check dropped; null when it did not run"
     )
     turn_average: bool | None = Field(
         default=None, description="vgn: whether the request was turn-averaged; null for antipodal"
@@ -379,7 +385,8 @@ class ModelInfo(_Model):
     runtime: dict[str, Any] | None = Field(
         default=None,
         description="how the network runs: torch threads, OpenMP wait policy (and whether the service "
-        "set it before torch loaded), inference form, precision, micro-batching window and counts",
+        "set it before torch loaded), inference form, precision, micro-batching window and counts, and "
+        "what a grasp request that does not say gets: turn_average and clearance",
     )
 
 

@@ -169,22 +169,25 @@ class PlanningService:
 
     def plan(self, session_id: str, query: GraspQuery) -> GraspResult:
         """Ranked grasps (world frame, best first) on the session's fused volume, by VGN or,
-        with ``planner="antipodal"``, by the geometric baseline on its cloud (no model needed)."""
+        with ``planner="antipodal"``, by the geometric baseline on its cloud (no model needed).
+        Options the query leaves unset (turn averaging, the clearance check) take the operator's
+        defaults, so a plain request gets the service's best answer."""
         self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
         baseline = query.planner == "antipodal"
         turn_average = None
         if not baseline and not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
+        clearance = self.settings.clearance if query.clearance is None else query.clearance
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
             observed = session.volume.cloud() if baseline else session.volume.grid()
-            surface = session.volume.surface_points() if query.clearance else None
+            surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             frame_count, integration_ms = session.frame_count, session.integration_ms
             revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
         # With the clearance check, every grasp is checked and only then are max_grasps kept.
-        ranked = query.model_copy(update={"max_grasps": None}) if query.clearance else query
+        ranked = query.model_copy(update={"max_grasps": None}) if clearance else query
         if baseline:
             config = antipodal_config(ranked)
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
@@ -241,5 +244,6 @@ class PlanningService:
                 **runtime_report(),
                 **self.planner.runtime(),
                 "turn_average": self.settings.turn_average,
+                "clearance": self.settings.clearance,
             },
         )

@@ -23,17 +23,33 @@ from sim_worker.results import ResultsFolder, RoundRecord
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     """``config`` with the planner's identity filled in: the weights' id (a resume with other
-    weights is refused), and the threshold and turn averaging actually used when not given
-    (the service's defaults; a service from before the turn-averaging default did not)."""
+    weights is refused), and the threshold, turn averaging and clearance check actually used
+    when not given (the service's defaults), so that config.json records what was done."""
+    model = vgn.model()
+    runtime = model.runtime or {}
+    clearance = service_default(config.clearance, runtime, "clearance")
     if config.planner == "vgn":
-        model = vgn.model()
         threshold = model.threshold if config.threshold is None else config.threshold
-        turns = config.turn_average
-        if turns is None:
-            turns = bool((model.runtime or {}).get("turn_average", False))
-        return dataclasses.replace(config, model=model.model_id, threshold=threshold, turn_average=turns)
+        turns = service_default(config.turn_average, runtime, "turn_average")
+        return dataclasses.replace(
+            config, model=model.model_id, threshold=threshold, turn_average=turns, clearance=clearance
+        )
     threshold = ANTIPODAL_DEFAULT_THRESHOLD if config.threshold is None else config.threshold
-    return dataclasses.replace(config, model="antipodal", threshold=threshold, turn_average=False)
+    return dataclasses.replace(
+        config, model="antipodal", threshold=threshold, turn_average=False, clearance=clearance
+    )
+
+
+def service_default(choice: bool | None, runtime: dict, switch: str) -> bool:
+    """``choice``, or when ``None`` the default the service reports in its ``/model`` runtime;
+    a service from before that default did not apply the option to requests that do not say."""
+    return bool(runtime.get(switch, False)) if choice is None else choice
+
+
+def service_runtime(config: ClutterConfig, vgn: VGNClient) -> dict:
+    """The service's ``/model`` runtime, with its defaults; a ``resolve`` for Ray's
+    ``ClutterPool.prepare`` (``config`` is not used), importable on every worker."""
+    return vgn.model().runtime or {}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -49,9 +65,11 @@ def run(args: argparse.Namespace) -> int:
         views=args.views,
         selection=args.selection,
         noise=args.noise,
+        sensor=getattr(args, "sensor", None),
+        pose_error=getattr(args, "pose_error", False),
         planner=args.planner,
         renderer=args.renderer,
-        clearance=getattr(args, "clearance", False),
+        clearance=getattr(args, "clearance", None),
         turn_average=getattr(args, "turn_average", None),
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")

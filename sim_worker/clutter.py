@@ -25,6 +25,7 @@ from sim_worker.metrics import summarize
 from sim_worker.objects import object_set
 from sim_worker.results import ResultsFolder, RoundRecord
 from sim_worker.scenes import generate_scene
+from sim_worker.sensors import PoseError, StructuredLightNoise
 from sim_worker.service_session import fresh_session
 from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
 from sim_worker.world import Renderer, World
@@ -32,6 +33,8 @@ from sim_worker.world import Renderer, World
 MAX_CONSECUTIVE_FAILURES = 2
 
 ClutterScene = Literal["blocks", "pile", "packed"]
+#: Depth-sensor models (docs/sensors.md): Dex-Net's noise, or a structured-light camera's errors.
+Sensor = Literal["dex", "structured-light"]
 Views = Literal["six", "side"]
 Selection = Literal["best", "random"]
 Planner = Literal["vgn", "antipodal"]
@@ -53,10 +56,14 @@ class ClutterConfig:
     noise: bool = False
     renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
-    clearance: bool = False  # ask the service to drop grasps whose approach hits observed geometry
-    # Ask VGN for outputs averaged over four quarter turns of the grid; None: the service's default
+    # Ask the service to drop grasps whose approach hits observed geometry, and VGN for outputs
+    # averaged over four quarter turns of the grid; None: the service's default for each
     # (resolve_planner records what that was before a run starts).
+    clearance: bool | None = None
     turn_average: bool | None = None
+    # A depth sensor's errors on every view (``noise`` is "dex"), and per-view camera pose error.
+    sensor: Sensor | None = None
+    pose_error: bool = False
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -67,6 +74,8 @@ class ClutterConfig:
             ("renderer", Renderer),
         ):
             check_choice(name, getattr(self, name), allowed)
+        if self.sensor is not None:
+            check_choice("sensor", self.sensor, Sensor)
         check_at_least("object_count", self.object_count, 1)
         check_at_least("rounds", self.rounds, 1)
         check_fraction("threshold", self.threshold, optional=True)
@@ -74,13 +83,23 @@ class ClutterConfig:
     def as_json(self) -> dict:
         """The settings as stored in the results folder's config.json, which a resume must match.
 
-        ``clearance`` and ``turn_average`` are recorded when on; left out when off, so folders
-        of runs from before these options still resume."""
+        ``clearance``, ``turn_average``, ``sensor`` and ``pose_error`` are recorded when on; left
+        out when off, so folders of runs from before these options still resume. Resolve the
+        first two first (``resolve_planner``): unresolved, the service's default is recorded as
+        off whatever it is."""
         settings = asdict(self)
-        for switch in ("clearance", "turn_average"):
+        for switch in ("clearance", "turn_average", "sensor", "pose_error"):
             if not settings[switch]:
                 del settings[switch]
         return settings
+
+    def depth_noise(self) -> DepthNoise | StructuredLightNoise | None:
+        """The noise model of every rendered view (``sensor`` wins over ``noise``)."""
+        if self.sensor == "structured-light":
+            return StructuredLightNoise(SIM_INTRINSICS)
+        if self.sensor == "dex" or self.noise:
+            return DepthNoise()
+        return None
 
 
 def camera_views(kind: str) -> list[np.ndarray]:
@@ -101,7 +120,8 @@ class ClutterRemoval:
         self.config, self.vgn, self.results = config, vgn, results
         self.world = World(renderer=config.renderer)
         self.gripper = Gripper(self.world)
-        self.camera = Camera(self.world, noise=DepthNoise() if config.noise else None)
+        self.camera = Camera(self.world, noise=config.depth_noise())
+        self.pose_error = PoseError() if config.pose_error else None
         self.views = camera_views(config.views)
         self.objects = object_set(config.objects or "", config.scene)
         self.image_dir = image_dir
@@ -177,7 +197,10 @@ class ClutterRemoval:
         self.session_id = fresh_session(self.vgn, self.session_id)
         total = 0.0
         for pose in self.views:
-            total += self.vgn.add_frame(self.session_id, self.camera.render_depth(pose), pose).integration_ms
+            depth = self.camera.render_depth(pose)
+            # The service is told where the camera was believed to be, not where it was.
+            reported = pose if self.pose_error is None else self.pose_error.perturb(pose, self.camera.rng)
+            total += self.vgn.add_frame(self.session_id, depth, reported).integration_ms
         return total
 
     def _body_name(self, body: int) -> str:

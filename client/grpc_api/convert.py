@@ -13,6 +13,7 @@ import numpy as np
 
 from client.grpc_api import grasp_planning_pb2 as pb
 from client.schemas import (
+    SWITCHES,
     FrameResult,
     GraspQuery,
     GraspResult,
@@ -179,10 +180,9 @@ def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
         if getattr(query, name) is not None:
             setattr(message, name, getattr(query, name))
     message.nms_size = query.nms_size
-    if query.clearance:
-        message.clearance = True
-    if query.turn_average is not None:
-        message.turn_average = query.turn_average
+    for switch in SWITCHES:  # unset means the service's default, so off is sent too
+        if getattr(query, switch) is not None:
+            setattr(message, switch, getattr(query, switch))
     crop_min, crop_max = query.crop_box or (None, None)
     for name, values in (
         ("crop_min", crop_min),

@@ -187,8 +187,11 @@ TIMES = {"seconds", "integration_time", "planning_time", "client_planning_time",
 
 
 def clear_scene(url: str, results: Path, rounds: int, crash_at: str | None = None):
+    """A clear-scene run that attempts grasps: without the clearance check, which drops every
+    grasp of the random weights the test service loads."""
     args = [command("vgn-client"), "clear-scene", "--sim", "--renderer", "tiny", "--url", url,
-            "--object-count", "2", "--threshold", "0.5", "--rounds", str(rounds), "--results", str(results)]  # fmt: skip
+            "--object-count", "2", "--threshold", "0.5", "--no-clearance", "--rounds", str(rounds),
+            "--results", str(results)]  # fmt: skip
     return run(args, crash_at)
 
 
@@ -234,7 +237,8 @@ def test_clear_scene_killed_during_a_round(server, reference_results, tmp_path):
     """``kill -9`` while round 1 plays: round 0 is kept, round 1 is played again from its start."""
     results = tmp_path / "run"
     args = [command("vgn-client"), "clear-scene", "--sim", "--renderer", "tiny", "--url", server.url,
-            "--object-count", "2", "--threshold", "0.5", "--rounds", "2", "--results", str(results)]  # fmt: skip
+            "--object-count", "2", "--threshold", "0.5", "--no-clearance", "--rounds", "2",
+            "--results", str(results)]  # fmt: skip
     process = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     kill_when(process, lambda: (results / "rounds.csv").exists())
     kept = (results / "rounds.csv").read_text()
@@ -298,7 +302,7 @@ def assert_same_training(made: Path, reference: Path) -> None:
 def reference_training(boxes: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The uninterrupted run, in this process (what the console script calls; it saves a
     process start): single-threaded torch computes the same numbers in any process."""
-    from service.training.cli import main
+    from training.cli import main
 
     out = tmp_path_factory.mktemp("reference") / "vgn.safetensors"
     threads = torch.get_num_threads()

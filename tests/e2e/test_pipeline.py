@@ -21,7 +21,7 @@ def test_generate_train_load_plan(server, tmp_path: Path):
     )  # fmt: skip
     assert generated.returncode == 0, generated.stderr
     trained = subprocess.run(
-        [sys.executable, "-m", "service.training.cli", "--data", str(data), "--epochs", "1", "--out", str(weights),
+        [sys.executable, "-m", "training.cli", "--data", str(data), "--epochs", "1", "--out", str(weights),
          "--threads", "1", "--no-progress", "--val-fraction", "0.5"],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip

@@ -208,9 +208,11 @@ def fused_session(core: PlanningService, views: int = 6) -> str:
 
 def test_the_core_checks_every_grasp_before_max_grasps(trained):
     session = fused_session(trained)
-    everything = trained.plan(session, GraspQuery(threshold=0.0))
+    everything = trained.plan(session, GraspQuery(threshold=0.0, clearance=False))
     checked = trained.plan(session, GraspQuery(threshold=0.0, clearance=True))
     assert everything.clearance_dropped is None
+    default = trained.plan(session, GraspQuery(threshold=0.0))
+    assert (default.grasps, default.clearance_dropped) == (checked.grasps, checked.clearance_dropped), "on"
     assert 0 < len(checked.grasps) < len(everything.grasps)
     assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
     assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps  # a subset, same order
@@ -223,14 +225,16 @@ def test_the_core_checks_every_grasp_before_max_grasps(trained):
 
 def test_the_antipodal_planner_takes_the_option_too(trained):
     session = fused_session(trained, views=2)
-    everything = trained.plan(session, GraspQuery(planner="antipodal"))
+    everything = trained.plan(session, GraspQuery(planner="antipodal", clearance=False))
     checked = trained.plan(session, GraspQuery(planner="antipodal", clearance=True))
+    assert everything.clearance_dropped is None and checked.clearance_dropped is not None
     assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps
     assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
 
 
 def test_the_option_over_http_and_grpc(trained):
-    """Accepted by both front ends, no change when false, a subset when true, the same answers."""
+    """Accepted by both front ends, on when not given (the service's default), the planner's
+    own grasps when false, a subset when true, the same answers."""
     session = fused_session(trained)
     server, port = build_server(trained, "127.0.0.1", 0)
     try:
@@ -243,12 +247,13 @@ def test_the_option_over_http_and_grpc(trained):
                 for value in (None, "false", "true")
             }
             assert all(a.status_code == 200 for a in answers.values())
-            plain, off, on = (GraspResult.model_validate(a.json()) for a in answers.values())
-            assert off.grasps == plain.grasps and off.clearance_dropped is plain.clearance_dropped is None
+            default, plain, on = (GraspResult.model_validate(a.json()) for a in answers.values())
+            assert plain.clearance_dropped is None
             assert on.grasps and len(on.grasps) < len(plain.grasps)
             assert [g for g in plain.grasps if g in on.grasps] == on.grasps
             assert on.clearance_dropped == len(plain.grasps) - len(on.grasps)
-            for clearance, expected in ((False, plain), (True, on)):
+            assert (default.grasps, default.clearance_dropped) == (on.grasps, on.clearance_dropped)
+            for clearance, expected in ((False, plain), (True, on), (None, on)):
                 over_grpc = rpc.grasps(session, threshold=0.0, clearance=clearance)
                 assert over_grpc.grasps == expected.grasps
                 assert over_grpc.clearance_dropped == expected.clearance_dropped
@@ -264,13 +269,15 @@ def test_the_option_over_http_and_grpc(trained):
         server.stop(None)
 
 
-def test_the_grpc_message_carries_the_option():
-    message = convert.grasp_query_message("s", GraspQuery(clearance=True))
-    assert message.HasField("clearance") and message.clearance
-    assert not convert.grasp_query_message("s", GraspQuery()).HasField("clearance")
-    assert GraspQuery(**convert.grasp_query_dict(message)).clearance
+@pytest.mark.parametrize("clearance", [True, False, None])
+def test_the_grpc_message_carries_the_option_whenever_set(clearance):
+    """Off is sent too: left unset, the service applies its default (on)."""
+    message = convert.grasp_query_message("s", GraspQuery(clearance=clearance))
+    assert message.HasField("clearance") is (clearance is not None)
+    assert GraspQuery(**convert.grasp_query_dict(message)).clearance is clearance
 
 
-def test_the_client_sends_the_option_only_when_on():
+def test_the_client_sends_the_option_whenever_set():
     assert "clearance" not in GraspQuery().to_params()
     assert GraspQuery(clearance=True).to_params()["clearance"] == "true"
+    assert GraspQuery(clearance=False).to_params()["clearance"] == "false"

@@ -18,9 +18,6 @@ from service.core import PlanningService
 from service.grpc.server import build_server
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL, Settings
-from service.training.augment import rotate_z
-from service.training.labels import LabelSet
-from service.training.quaternions import about_z, flipped, multiply
 from service.vgn.batching import MicroBatcher
 from service.vgn.detection import grasp_region
 from service.vgn.turns import (
@@ -33,6 +30,9 @@ from service.vgn.turns import (
 )
 from tests.helpers.grids import recorded_grids
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from training.augment import rotate_z
+from training.labels import LabelSet
+from training.quaternions import about_z, flipped, multiply
 
 N = 8
 
@@ -124,20 +124,23 @@ def test_a_kept_output_serves_only_requests_with_the_same_averaging(core: Planni
     scene = BoxScene()
     for pose in circle_views(3):
         core.add_frame(session, scene.depth(pose), pose)
+    # Without the clearance check: it drops every grasp of the random weights on this scene.
     plain, averaged = (
-        GraspQuery(threshold=0.0, turn_average=False),
-        GraspQuery(threshold=0.0, turn_average=True),
+        GraspQuery(threshold=0.0, turn_average=False, clearance=False),
+        GraspQuery(threshold=0.0, turn_average=True, clearance=False),
     )
     first_plain = core.plan(session, plain).grasps
     first_averaged = core.plan(session, averaged).grasps
     assert first_averaged != first_plain
     assert core.plan(session, plain).grasps == first_plain
     assert core.plan(session, averaged).grasps == first_averaged
-    assert core.plan(session, GraspQuery(threshold=0.0)).grasps == first_plain, "the default is off"
+    default = GraspQuery(threshold=0.0, clearance=False)
+    assert core.plan(session, default).grasps == first_averaged, "the default is on"
 
 
 def test_the_operator_chooses_the_default_and_requests_may_override_it(random_checkpoint):
-    core = PlanningService.from_settings(Settings(model=random_checkpoint, api_key=None, turn_average=True))
+    settings = Settings(model=random_checkpoint, api_key=None, turn_average=False, clearance=False)
+    core = PlanningService.from_settings(settings)
     try:
         session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
         scene = BoxScene()
@@ -146,10 +149,10 @@ def test_the_operator_chooses_the_default_and_requests_may_override_it(random_ch
         default = core.plan(session, GraspQuery(threshold=0.0))
         plain = core.plan(session, GraspQuery(threshold=0.0, turn_average=False))
         averaged = core.plan(session, GraspQuery(threshold=0.0, turn_average=True))
-        assert default.grasps == averaged.grasps != plain.grasps
-        assert (default.turn_average, plain.turn_average) == (True, False)
+        assert default.grasps == plain.grasps != averaged.grasps
+        assert (default.turn_average, averaged.turn_average) == (False, True)
         assert core.plan(session, GraspQuery(planner="antipodal")).turn_average is None
-        assert core.model_info().runtime["turn_average"] is True
+        assert core.model_info().runtime["turn_average"] is False
     finally:
         core.close()
 
@@ -163,18 +166,20 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     scene = BoxScene()
     for pose in circle_views(3):
         vgn.add_frame(session, scene.depth(pose), pose)
-    plain = vgn.grasps(session, threshold=0.0, turn_average=False)
-    averaged = vgn.grasps(session, threshold=0.0, turn_average=True)
+    # Without the clearance check: it drops every grasp of the random weights on this scene.
+    plain = vgn.grasps(session, threshold=0.0, turn_average=False, clearance=False)
+    averaged = vgn.grasps(session, threshold=0.0, turn_average=True, clearance=False)
     assert averaged.grasps and averaged.grasps != plain.grasps
     assert (plain.turn_average, averaged.turn_average) == (False, True)
-    default = vgn.grasps(session, threshold=0.0)
-    assert default.grasps == plain.grasps and default.turn_average is False, "off unless the operator says"
-    assert vgn.model().runtime["turn_average"] is False
+    default = vgn.grasps(session, threshold=0.0, clearance=False)
+    assert default.grasps == averaged.grasps and default.turn_average is True, "on unless the operator says"
+    assert vgn.model().runtime["turn_average"] is True
     bad = httpx.get(f"{vgn.url}/sessions/{session}/grasps", params={"turn_average": "maybe"})
     assert bad.status_code == 422 and "turn_average" in bad.json()["message"]
 
     for option, expected in (("--turn-average", averaged), ("--no-turn-average", plain)):
-        assert main(["grasps", session, "--url", vgn.url, "--threshold", "0", option, "--json"]) == 0
+        argv = ["grasps", session, "--url", vgn.url, "--threshold", "0", option, "--no-clearance", "--json"]
+        assert main(argv) == 0
         assert GraspResult.model_validate_json(capsys.readouterr().out).grasps == expected.grasps[:10]
 
     local = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
@@ -184,10 +189,11 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     try:
         with GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
             for turn_average in (False, True, None):
-                expected = core.plan(local, GraspQuery(threshold=0.0, turn_average=turn_average))
-                answer = rpc.grasps(local, threshold=0.0, turn_average=turn_average)
+                options = {"threshold": 0.0, "turn_average": turn_average, "clearance": False}
+                expected = core.plan(local, GraspQuery(**options))
+                answer = rpc.grasps(local, **options)
                 assert answer.grasps == expected.grasps
-                assert answer.turn_average is (turn_average is True)
+                assert answer.turn_average is (turn_average is not False)
     finally:
         server.stop(None)
 

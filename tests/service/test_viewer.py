@@ -6,7 +6,7 @@ import io
 import json
 import re
 from pathlib import Path
-from urllib.parse import urljoin, urlsplit
+from urllib.parse import urlencode, urljoin, urlsplit
 
 import httpx
 import numpy as np
@@ -24,7 +24,8 @@ from tests.helpers.browser import headless_chromium
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 SCENE = BoxScene()
-OPTIONS = {"threshold": 0.5, "max_grasps": 12}
+#: Without the clearance check: it drops every grasp of the random weights on this scene.
+OPTIONS = {"threshold": 0.5, "max_grasps": 12, "clearance": "false"}
 
 
 def fuse(client, session_id: str, views: int = 6) -> None:
@@ -174,7 +175,7 @@ def test_page_renders_in_headless_chromium(server, vgn, tmp_path: Path) -> None:
     expected = vgn.grasps(session, **OPTIONS).grasps
     assert expected, "the scene must give grasps for this test to mean anything"
     with headless_chromium() as driver:
-        driver.get(f"{server.url}/sessions/{session}/view?threshold=0.5&max_grasps=12&refresh=0.5")
+        driver.get(f"{server.url}/sessions/{session}/view?{urlencode({**OPTIONS, 'refresh': 0.5})}")
         WebDriverWait(driver, 60).until(lambda d: d.execute_script("return document.body.dataset.rendered"))
         rows = driver.find_elements(By.CSS_SELECTOR, "#grasp-rows tr")
         assert len(rows) == len(expected)
@@ -208,12 +209,15 @@ def test_cli_saves_the_viewer(server, vgn, tmp_path: Path, capsys) -> None:
     for pose in circle_views(2):
         vgn.add_frame(session, SCENE.depth(pose), pose)
     out = tmp_path / "view.html"
-    assert main(["view", session, "--url", server.url, "--out", str(out), "--threshold", "0.5"]) == 0
+    argv = ["view", session, "--url", server.url, "--out", str(out), "--threshold", "0.5", "--no-clearance"]
+    assert main(argv) == 0
     page = out.read_text(encoding="utf-8")
     assert "<script src" not in page, "a saved page opens offline"
     scene = json.loads(page.split('<script id="scene" type="application/json">')[1].split("</script>")[0])
     assert scene["session_id"] == session and scene["frame_count"] == 2 and scene["query"]["refresh"] == 0
-    assert len(scene["grasps"]) == len(vgn.grasps(session, threshold=0.5, max_grasps=20).grasps)
+    assert scene["grasps"] and scene["query"]["clearance"] is False
+    planned = vgn.grasps(session, threshold=0.5, max_grasps=20, clearance=False)
+    assert len(scene["grasps"]) == len(planned.grasps)
     assert main(["view", "nope", "--url", server.url, "--out", str(tmp_path / "x.html")]) == 1
     assert "404" in capsys.readouterr().err and not (tmp_path / "x.html").exists()
     assert main(["view", session, "--url", server.url, "--out", str(out), "--approach", "0,0,-1"]) == 2

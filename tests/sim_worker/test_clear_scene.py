@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from client.schemas import ModelInfo
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 from tests.helpers.runs import check_results, clear_scene, read_csv
@@ -79,13 +80,19 @@ def test_wilson_interval_known_values():
     assert high == 100.0 and 69 < low < 73
 
 
+#: The clearance check drops every grasp of the random weights the test services load, so runs
+#: that must execute grasps turn it off.
+UNCHECKED = "--no-clearance"
+
+
 def test_short_run_through_a_real_service_and_resume(server, tmp_path: Path):
     results = tmp_path / "run"
-    common = ["--url", server.url, "--object-count", "3", "--threshold", "0.5", "--results", str(results)]
+    common = ["--url", server.url, "--object-count", "3", "--threshold", "0.5", UNCHECKED,
+              "--results", str(results)]  # fmt: skip
     first = clear_scene(*common, "--rounds", "1")
     assert first.returncode == 0, first.stderr
     assert "success rate" in first.stdout and "percent cleared" in first.stdout
-    check_results(results, 1)
+    assert check_results(results, 1)["attempts"] > 0
     rounds_before = (results / "rounds.csv").read_text()
     second = clear_scene(*common, "--rounds", "2")
     assert second.returncode == 0, second.stderr
@@ -97,9 +104,10 @@ def test_short_run_through_a_real_service_and_resume(server, tmp_path: Path):
 def test_embedded_service_run_with_images(random_checkpoint: Path, tmp_path: Path):
     results = tmp_path / "embedded"
     run = clear_scene("--model", str(random_checkpoint), "--rounds", "1", "--object-count", "2",
-                      "--threshold", "0.5", "--results", str(results), "--save-images")  # fmt: skip
+                      "--threshold", "0.5", UNCHECKED, "--results", str(results), "--save-images")  # fmt: skip
     assert run.returncode == 0, run.stderr
     summary = check_results(results, 1)
+    assert summary["attempts"] > 0
     assert len(list((results / "images").glob("round*_attempt*.png"))) == summary["attempts"]
     assert (results / "images" / "round0000_sheet.png").exists()
 
@@ -116,7 +124,7 @@ def test_without_a_model_the_run_explains_itself(tmp_path: Path, monkeypatch):
                                           ("packed", ["--views", "side", "--selection", "random"])])  # fmt: skip
 def test_longer_runs(server, tmp_path: Path, scene: str, extra: list[str]):
     results = tmp_path / scene
-    run = clear_scene("--url", server.url, "--scene", scene, "--rounds", "3", "--threshold", "0.5",
+    run = clear_scene("--url", server.url, "--scene", scene, "--rounds", "3", "--threshold", "0.5", UNCHECKED,
                       "--results", str(results), *extra)  # fmt: skip
     assert run.returncode == 0, run.stderr
     check_results(results, 3)
@@ -136,11 +144,12 @@ def test_baseline_planner_needs_no_model(tmp_path: Path, monkeypatch):
 
 
 def test_benchmark_table_next_to_the_paper(tmp_path: Path):
+    """The plain planner (no clearance check), as the paper measures it, beside the paper's rows."""
     from benchmarks.clutter import main
 
     out = tmp_path / "bench"
     assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
-                 "--renderer", "tiny", "--out", str(out)]) == 0  # fmt: skip
+                 "--renderer", "tiny", "--no-clearance", "--out", str(out)]) == 0  # fmt: skip
     rows = json.loads((out / "table.json").read_text())
     assert [(r["planner"], r["scenario"], r["rounds"]) for r in rows] == [("antipodal", "blocks-5", 1)]
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
@@ -154,42 +163,77 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
     assert "87.6 / 90.1" in table and "88.6 / 39.4" in table, "the paper's Table 1 rows stand beside ours"
     assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()
     (out / "table.md").unlink()
-    assert main(["--report", "--out", str(out)]) == 0, "the table again from the results, running nothing"
+    assert main(["--report", "--no-clearance", "--out", str(out)]) == 0, "the table again, running nothing"
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
 
 
 @pytest.mark.parametrize(
-    ("option", "recorded", "said"),
-    [("--clearance", "clearance", "clearance check"), ("--turn-average", "turn_average", "turn averaging")],
+    ("options", "averaged", "checked"),
+    [
+        ((), True, True),
+        (("--no-turn-average", "--no-clearance"), False, False),
+        (("--no-clearance",), True, False),
+    ],
 )
-def test_clear_scene_records_its_grasp_options(server, tmp_path: Path, option: str, recorded: str, said: str):
-    results = tmp_path / recorded
+def test_clear_scene_records_the_services_defaults_or_the_choice(
+    server, tmp_path: Path, options: tuple[str, ...], averaged: bool, checked: bool
+):
+    """Without an option the service's default applies (both on here) and is recorded as such;
+    an option turned off is left out of config.json, as in folders from before the options."""
+    results = tmp_path / "run"
     run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
-                      option, "--results", str(results))  # fmt: skip
+                      *options, "--results", str(results))  # fmt: skip
     assert run.returncode == 0, run.stderr
     check_results(results, 1)
-    assert json.loads((results / "config.json").read_text())[recorded] is True
-    assert said in run.stdout
+    config = json.loads((results / "config.json").read_text())
+    assert (config.get("turn_average", False), config.get("clearance", False)) == (averaged, checked)
+    assert ("turn averaging" in run.stdout, "clearance check" in run.stdout) == (averaged, checked)
 
 
-def test_clear_scene_records_the_services_turn_averaging_default_or_the_choice(server, tmp_path: Path):
-    """Without the option the service's default applies (off here) and is recorded as such."""
-    for options, averaged in (((), False), (("--turn-average",), True)):
-        results = tmp_path / ("default" if not options else "turns")
-        run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
-                          *options, "--results", str(results))  # fmt: skip
-        assert run.returncode == 0, run.stderr
-        assert json.loads((results / "config.json").read_text()).get("turn_average", False) is averaged
-        assert ("turn averaging" in run.stdout) is averaged
+class ServiceDefaults:
+    """Stands in for a client of a service whose ``/model`` runtime is ``runtime``."""
+
+    def __init__(self, runtime: dict | None) -> None:
+        self.runtime = runtime
+
+    def model(self) -> ModelInfo:
+        return ModelInfo(loaded=True, model_id="m", source=None, architecture="VGN", parameters=1, device="cpu",
+                         conventions={}, threshold=0.8, runtime=self.runtime)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("runtime", "expected"),
+    [({"turn_average": True, "clearance": True}, (True, True)),
+     ({"turn_average": False, "clearance": False}, (False, False)),
+     ({"turn_average": True}, (True, False)),  # a service from before the clearance default
+     (None, (False, False))],
+)  # fmt: skip
+def test_the_planner_is_resolved_to_the_services_defaults(runtime: dict | None, expected: tuple[bool, bool]):
+    from sim_worker.clear_scene import resolve_planner
+    from sim_worker.clutter import ClutterConfig
+
+    vgn = ServiceDefaults(runtime)
+    resolved = resolve_planner(ClutterConfig(), vgn)
+    assert (resolved.turn_average, resolved.clearance) == expected
+    assert (resolved.model, resolved.threshold) == ("m", 0.8)
+    for choice in (True, False):  # a choice is kept whatever the default
+        chosen = resolve_planner(ClutterConfig(turn_average=choice, clearance=choice), vgn)
+        assert (chosen.turn_average, chosen.clearance) == (choice, choice)
+    baseline = resolve_planner(ClutterConfig(planner="antipodal"), vgn)
+    assert (baseline.turn_average, baseline.clearance) == (False, expected[1]), "the check applies to it too"
 
 
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
     """Only VGN runs take the option: their folders end in -turns and their rows read vgn+turns."""
-    from benchmarks.clutter import combinations, parse_args, scenario_config, table_row
+    from benchmarks.clutter import combinations, parse_args, scenario_config, table_row, with_service_defaults
     from sim_worker.clutter import ClutterConfig
 
-    args = parse_args(["--planners", "vgn", "antipodal", "--selections", "random", "--scenarios", "pile-5",
-                       "--turn-average", "--clearance", "--out", str(tmp_path)])  # fmt: skip
+    off = {"turn_average": False, "clearance": False}  # a service whose operator turned both off
+    args = with_service_defaults(
+        parse_args(["--planners", "vgn", "antipodal", "--selections", "random", "--scenarios", "pile-5",
+                    "--turn-average", "--clearance", "--out", str(tmp_path)]),
+        off,
+    )  # fmt: skip
     runs = {planner: folder.name for planner, _, _, folder in combinations(args)}
     assert runs == {
         "vgn": "vgn-random-pile-5-turns-clearance",
@@ -203,11 +247,23 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
         table_row("antipodal", "random", "pile-5", antipodal.as_json(), {})["planner"]
         == "antipodal+clearance"
     )
-    default = parse_args(["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random"])
-    assert [folder.name for *_, folder in combinations(default)] == ["vgn-random-pile-5"], (
-        "off, as the service"
+    unsaid = parse_args(["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random"])
+    assert (unsaid.turn_average, unsaid.clearance) == (None, None), "left to the service"
+    best = {"turn_average": True, "clearance": True}
+    for runtime, folder in (
+        (off, "vgn-random-pile-5"),
+        (best, "vgn-random-pile-5-turns-clearance"),
+        ({}, "vgn-random-pile-5"),
+    ):  # a service that reports no default applies none
+        resolved = with_service_defaults(unsaid, runtime)
+        assert [f.name for *_, f in combinations(resolved)] == [folder], runtime
+        config = scenario_config(resolved, "vgn", "random", "pile-5")
+        assert (config.turn_average, config.clearance) == (runtime.get("turn_average", False),
+                                                           runtime.get("clearance", False))  # fmt: skip
+    chosen = with_service_defaults(
+        parse_args(["--no-turn-average", "--clearance"]), best | {"clearance": False}
     )
-    assert scenario_config(default, "vgn", "random", "pile-5").turn_average is False
+    assert (chosen.turn_average, chosen.clearance) == (False, True), "a choice beats the default"
 
 
 def test_configs_without_the_clearance_check_keep_their_recorded_form():
@@ -218,20 +274,49 @@ def test_configs_without_the_clearance_check_keep_their_recorded_form():
     assert ClutterConfig(clearance=True).as_json()["clearance"] is True
 
 
-def test_benchmark_rows_with_the_clearance_check_are_labelled(tmp_path: Path):
+def test_benchmark_rows_with_the_clearance_check_are_labelled(tmp_path: Path, monkeypatch):
+    """The benchmark follows the embedded service's default (the check on) and says so."""
     from benchmarks.clutter import main
 
+    for switch in ("VGN_CLEARANCE", "VGN_TURN_AVERAGE"):
+        monkeypatch.delenv(switch, raising=False)
     out = tmp_path / "bench"
     assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
-                 "--renderer", "tiny", "--clearance", "--out", str(out)]) == 0  # fmt: skip
+                 "--renderer", "tiny", "--out", str(out)]) == 0  # fmt: skip
     rows = json.loads((out / "table.json").read_text())
     assert [(r["planner"], r["scenario"]) for r in rows] == [("antipodal+clearance", "blocks-5")]
     assert "| antipodal+clearance | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
     folder = out / "antipodal-best-blocks-5-clearance"
     assert json.loads((folder / "config.json").read_text())["clearance"] is True
-    assert main(["--report", "--clearance", "--out", str(out)]) == 0
+    assert main(["--report", "--out", str(out)]) == 0
     assert "| antipodal+clearance |" in (out / "table.md").read_text()
-    # Without the option the report finds no run of its own kind: it says so and keeps the table.
-    assert main(["--report", "--out", str(out)]) == 1
+    # Without the check the report finds no run of its own kind: it says so and keeps the table.
+    assert main(["--report", "--no-clearance", "--out", str(out)]) == 1
     assert "| antipodal+clearance |" in (out / "table.md").read_text()
     assert json.loads((out / "table.json").read_text()) == rows
+
+
+def test_a_structured_light_sensor_with_pose_error_is_run_and_recorded(tmp_path: Path, monkeypatch):
+    """clear-scene through the structured-light model and reported-pose error: both reach the
+    service (the baseline plans on what the sensor saw) and config.json records them."""
+    monkeypatch.setenv("VGN_MODEL", "none")
+    results = tmp_path / "sensor"
+    run = clear_scene("--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--sensor",
+                      "structured-light", "--pose-error", "--results", str(results))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    check_results(results, 1)
+    config = json.loads((results / "config.json").read_text())
+    assert config["sensor"] == "structured-light" and config["pose_error"] is True
+    refused = clear_scene(
+        "--planner", "antipodal", "--rounds", "1", "--object-count", "2", "--results", str(results)
+    )
+    assert refused.returncode != 0  # the same folder without the sensor is another run
+
+
+def test_sensor_options_make_their_own_benchmark_folders():
+    from benchmarks.clutter import combinations, parse_args
+
+    args = parse_args(["--planners", "antipodal", "--selections", "best", "--scenarios", "pile-5",
+                       "--sensor", "structured-light", "--pose-error", "--no-turn-average", "--no-clearance"])  # fmt: skip
+    ((_, _, _, folder),) = combinations(args)
+    assert folder.name == "antipodal-best-pile-5-structured-light-pose"

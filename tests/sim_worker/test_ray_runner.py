@@ -184,6 +184,8 @@ def test_benchmark_on_ray_equals_a_single_process_run(ray_address, tmp_path):
     assert main([*common, "--out", str(tmp_path / "single")]) == 0
     assert main([*common, "--out", str(tmp_path / "ray"), "--ray", ray_address, "--workers", "2"]) == 0
     for name in ("rounds.csv", "grasps.csv"):
-        expected = rows_without_timings(tmp_path / "single" / "antipodal-best-blocks-5" / name)
+        # The embedded services' default: the clearance check on.
+        expected = rows_without_timings(tmp_path / "single" / "antipodal-best-blocks-5-clearance" / name)
         assert expected, f"{name} holds rows"
-        assert rows_without_timings(tmp_path / "ray" / "antipodal-best-blocks-5" / name) == expected, name
+        folder = tmp_path / "ray" / "antipodal-best-blocks-5-clearance"
+        assert rows_without_timings(folder / name) == expected, name

@@ -13,18 +13,18 @@ from scipy.spatial.transform import Rotation
 
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
-from service.training.augment import Placement
-from service.training.cli import main
-from service.training.dataset import Sample, SceneDataset, collate, load_scenes
-from service.training.distill import SoftTargets, soft_targets
-from service.training.grids import MAX_DEPTH, RESOLUTION
-from service.training.labels import LabelSet
-from service.training.loss import distillation_loss
-from service.training.quaternions import flipped
 from service.vgn.checkpoint import card_path, save_vgn, weights_id
 from service.vgn.network import VGN
 from tests.helpers.datasets import VOXEL, N, make_dataset
 from tests.helpers.grids import recorded_grids
+from training.augment import Placement
+from training.cli import main
+from training.dataset import Sample, SceneDataset, collate, load_scenes
+from training.distill import SoftTargets, soft_targets
+from training.grids import MAX_DEPTH, RESOLUTION
+from training.labels import LabelSet
+from training.loss import distillation_loss
+from training.quaternions import flipped
 from vgn_data.dataset import RawDataset
 
 

@@ -35,13 +35,14 @@ def test_the_cards_threshold_is_the_default_and_a_request_overrides_it(
             and model["card"]["matches_weights"]
         )
         session = open_fused_session(http)
-        default = http.get(f"/sessions/{session}/grasps").json()
-        explicit = http.get(f"/sessions/{session}/grasps", params={"threshold": 0.0}).json()
+        plain = {"clearance": "false"}  # the random model's grasps would all hit the surface
+        default = http.get(f"/sessions/{session}/grasps", params=plain).json()
+        explicit = http.get(f"/sessions/{session}/grasps", params={**plain, "threshold": 0.0}).json()
         assert default["threshold"] == 0.0 and default["grasps"], (
             "threshold 0 lets the random model's grasps through"
         )
         assert default["grasps"] == explicit["grasps"]
-        strict = http.get(f"/sessions/{session}/grasps", params={"threshold": 0.99}).json()
+        strict = http.get(f"/sessions/{session}/grasps", params={**plain, "threshold": 0.99}).json()
         assert strict["threshold"] == 0.99 and all(g["quality"] >= 0.99 for g in strict["grasps"])
         assert len(strict["grasps"]) < len(default["grasps"])
         baseline = http.get(f"/sessions/{session}/grasps", params={"planner": "antipodal"}).json()

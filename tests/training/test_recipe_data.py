@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from service.training.dataset import RenderedObservations, SceneDataset, load_scenes
-from service.training.observations import ObservationSettings, render_cache
-from service.training.recipe_shards import RecipeFolder, shard_arrays
-from service.training.shards import ShardFolder, sha256_of
+from training.dataset import RenderedObservations, SceneDataset, load_scenes
+from training.observations import ObservationSettings, render_cache
+from training.recipe_shards import RecipeFolder, shard_arrays
+from training.shards import ShardFolder, sha256_of
 from vgn_data.dataset import RawDataset
 
 
@@ -31,7 +31,7 @@ def generate(url: str, out: Path, scenes: int, seed: int = 3) -> None:
 
 
 def vgn_data(*args: str) -> subprocess.CompletedProcess:
-    return run("-m", "service.training.data_cli", *args)
+    return run("-m", "training.data_cli", *args)
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +96,7 @@ def test_a_recipe_that_no_longer_matches_its_labels_fails_verification(raw: Path
 
 def rebuild_records(arrays: dict[str, np.ndarray]) -> list:
     """The records of a shard's arrays (the inverse of ``shard_arrays``), to write a changed copy."""
-    from service.training.recipe_shards import RecipeRecord, RecipeShard
+    from training.recipe_shards import RecipeRecord, RecipeShard
 
     shard = RecipeShard("pile", "x", arrays)
     records = []
@@ -128,7 +128,7 @@ def git(repo: Path, *args: str) -> None:
 def test_grid_shards_migrate_to_recipes_with_proof(raw: Path, tmp_path: Path):
     repo = tmp_path / "repo"
     grids = repo / "data"
-    packed = run("-m", "service.training.pack", str(raw), "--source", "pile", "--out", str(grids))
+    packed = run("-m", "training.pack", str(raw), "--source", "pile", "--out", str(grids))
     assert packed.returncode == 0, packed.stderr
     git(repo, "init", "-q")
     git(repo, "add", "-A")
@@ -162,7 +162,7 @@ def test_training_draws_fresh_observations_from_the_cache(raw: Path, tmp_path: P
     grids = np.load(path)
     (shard,) = RecipeFolder(data).load()
     assert grids.shape == (len(shard.scene_ids), 3, 40, 40, 40)
-    from service.training.recipe_grids import grid_digest
+    from training.recipe_grids import grid_digest
 
     for row in range(len(shard.scene_ids)):  # slot 0 is the scene's original observation
         np.testing.assert_array_equal(grid_digest(grids[row, 0]), shard.data["grid_digest"][row])
@@ -175,7 +175,7 @@ def test_training_draws_fresh_observations_from_the_cache(raw: Path, tmp_path: P
     assert len(seen) >= 2
     fixed = SceneDataset(scenes, augment=None, seed=0, copies=8)
     assert len({fixed[i].grid.numpy().tobytes() for i in range(0, 8 * len(scenes), len(scenes))}) == 1
-    trained = run("-m", "service.training.cli", "--data", str(data), "--cache", str(cache), "--observations", "3",
+    trained = run("-m", "training.cli", "--data", str(data), "--cache", str(cache), "--observations", "3",
                   "--observation-noise", "0.5", "--epochs", "1", "--val-fraction", "0", "--out",
                   str(tmp_path / "w.safetensors"), "--no-progress")  # fmt: skip
     assert trained.returncode == 0, trained.stderr

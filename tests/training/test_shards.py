@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import torch
 
-from service.training.augment import balanced_subset, height_range, random_placement
-from service.training.cli import main as train_main
-from service.training.dataset import SceneDataset, load_scenes
-from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
-from service.training.labels import LabelSet
-from service.training.pack import main as pack_main
-from service.training.shards import ShardError, ShardFolder, dequantize, quantize, sha256_of
 from tests.helpers.datasets import make_dataset
+from training.augment import balanced_subset, height_range, random_placement
+from training.cli import main as train_main
+from training.dataset import SceneDataset, load_scenes
+from training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
+from training.labels import LabelSet
+from training.pack import main as pack_main
+from training.shards import ShardError, ShardFolder, dequantize, quantize, sha256_of
 from vgn_data.dataset import RawDataset
 
 

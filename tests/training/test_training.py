@@ -19,10 +19,13 @@ from scipy.spatial.transform import Rotation
 from client.schemas import SessionCreate
 from service.core import PlanningService
 from service.planner import GraspPlanner
-from service.training.augment import random_augment, rotate_z, shift_z
-from service.training.checkpoint import checkpoint_path
-from service.training.cli import build_parser, config_from_args, main
-from service.training.dataset import (
+from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
+from service.vgn.network import VGN
+from tests.helpers.datasets import SMALL, TOP_DOWN, VOXEL, N, make_dataset
+from training.augment import random_augment, rotate_z, shift_z
+from training.checkpoint import checkpoint_path
+from training.cli import build_parser, config_from_args, main
+from training.dataset import (
     Batch,
     Sample,
     collate,
@@ -31,15 +34,12 @@ from service.training.dataset import (
     split_scenes,
     subsample_scenes,
 )
-from service.training.grids import cache_key
-from service.training.labels import LabelSet
-from service.training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
-from service.training.metrics import MetricAccumulator, choose_threshold, rotation_error_deg
-from service.training.quaternions import flipped, multiply
-from service.training.train import TrainConfig
-from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
-from service.vgn.network import VGN
-from tests.helpers.datasets import SMALL, TOP_DOWN, VOXEL, N, make_dataset
+from training.grids import cache_key
+from training.labels import LabelSet
+from training.loss import Predictions, gather, per_label_loss, rotation_loss, vgn_loss
+from training.metrics import MetricAccumulator, choose_threshold, rotation_error_deg
+from training.quaternions import flipped, multiply
+from training.train import TrainConfig
 from vgn_data.dataset import DatasetSetup, RawDataset
 
 

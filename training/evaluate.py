@@ -62,6 +62,7 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
     settings = dataclasses.asdict(config) | {
         "threshold": clutter.threshold,
         "turn_average": clutter.turn_average,
+        "clearance": clutter.clearance,
         "objects": Path(config.objects).name,
     }
     return {"settings": settings, **summary}

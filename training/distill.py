@@ -22,8 +22,8 @@ import torch
 from tqdm import tqdm
 
 from service.planner import GraspPlanner, InferenceOptions
-from service.training.labels import LabelSet
 from service.vgn.detection import grasp_region
+from training.labels import LabelSet
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
+from training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
 from vgn_data.dataset import RawDataset
 from vgn_data.files import remove_stale_temporaries, write_atomically
 

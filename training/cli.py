@@ -12,12 +12,12 @@ from pathlib import Path
 import torch
 
 from client.log_level import add_log_level_option, configure_logging
-from service.training import report
-from service.training.card import write_card
-from service.training.checkpoint import CheckpointMismatch, checkpoint_path
-from service.training.evaluate import EvaluationConfig, executed_grasp_success
-from service.training.observations import ObservationSettings
-from service.training.train import TrainConfig, TrainingError, TrainResult, train
+from training import report
+from training.card import write_card
+from training.checkpoint import CheckpointMismatch, checkpoint_path
+from training.evaluate import EvaluationConfig, executed_grasp_success
+from training.observations import ObservationSettings
+from training.train import TrainConfig, TrainingError, TrainResult, train
 
 #: The run's defaults live on TrainConfig; the options show and use them.
 DEFAULTS = {f.name: f.default for f in fields(TrainConfig)}

@@ -17,9 +17,9 @@ import math
 
 import torch
 
-from service.training.dataset import Batch
-from service.training.loss import Predictions
-from service.training.quaternions import flipped
+from training.dataset import Batch
+from training.loss import Predictions
+from training.quaternions import flipped
 
 #: Quality at or above this counts as a predicted success.
 THRESHOLD = 0.9

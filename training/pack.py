@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from client.log_level import add_log_level_option, configure_logging
-from service.training.shards import DEFAULT_SCENES_PER_SHARD, ShardError, ShardFolder, manifest_summary
+from training.shards import DEFAULT_SCENES_PER_SHARD, ShardError, ShardFolder, manifest_summary
 from vgn_data.dataset import RawDataset
 
 

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from service.training.labels import LabelSet
-from service.training.quaternions import about_z, multiply
+from training.labels import LabelSet
+from training.quaternions import about_z, multiply
 
 #: Largest z shift in voxels (both ways).
 MAX_Z_SHIFT = 4

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 from client.log_level import add_log_level_option, configure_logging
-from service.training.observations import ObservationSettings
-from service.training.shards import ShardError
 from sim_worker.recipes import RecipeError
+from training.observations import ObservationSettings
+from training.shards import ShardError
 
 
 def _objects_option(values: list[str]) -> dict[str, tuple[str, ...]]:
@@ -103,7 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _verify(args: argparse.Namespace) -> int:
-    from service.training.verify_recipes import verify
+    from training.verify_recipes import verify
 
     if args.scenes < 1:
         raise ValueError("--scenes must be >= 1")
@@ -121,7 +121,7 @@ def _verify(args: argparse.Namespace) -> int:
 
 
 def _pack(args: argparse.Namespace) -> int:
-    from service.training.recipe_pack import pack_raw
+    from training.recipe_pack import pack_raw
     from vgn_data.dataset import RawDataset
 
     for entry in pack_raw(RawDataset(args.raw), args.source, args.out, limit=args.limit):
@@ -131,9 +131,9 @@ def _pack(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from service.training.observations import render_cache
-    from service.training.recipe_shards import RecipeFolder
     from sim_worker.objects import default_cache_dir
+    from training.observations import render_cache
+    from training.recipe_shards import RecipeFolder
 
     settings = ObservationSettings(per_scene=args.per_scene, original=args.original,
                                    noise_fraction=args.noise_fraction,
@@ -162,8 +162,8 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _legacy_grids(args: argparse.Namespace) -> int:
-    from service.training.recipe_shards import RecipeFolder
-    from service.training.verify_recipes import grids_from_history
+    from training.recipe_shards import RecipeFolder
+    from training.verify_recipes import grids_from_history
 
     migration = RecipeFolder(args.data).manifest().get("migration", {})
     files = [name for record in migration.values() for name in record.get("grid_shards", [])]
@@ -176,7 +176,7 @@ def _legacy_grids(args: argparse.Namespace) -> int:
 
 
 def _show(args: argparse.Namespace) -> int:
-    from service.training.recipe_shards import RecipeFolder
+    from training.recipe_shards import RecipeFolder
 
     manifest = RecipeFolder(args.data).manifest()
     shards = manifest["shards"]
@@ -197,8 +197,8 @@ def _show(args: argparse.Namespace) -> int:
 
 
 def _migrate(args: argparse.Namespace) -> int:
-    from service.training.migrate import MigrationJob, run_migration
-    from service.training.shards import ShardFolder
+    from training.migrate import MigrationJob, run_migration
+    from training.shards import ShardFolder
 
     folder = ShardFolder(args.data)
     manifest = folder.manifest()
@@ -233,7 +233,7 @@ def _migrate(args: argparse.Namespace) -> int:
 
 
 def _finish_migration(args: argparse.Namespace, folder: object) -> int:
-    from service.training.recipe_pack import finish_migration
+    from training.recipe_pack import finish_migration
 
     summary = finish_migration(folder, args.work, args.data)
     for source, record in summary.items():

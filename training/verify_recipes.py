@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from service.training.recipe_grids import grid_digest, observation_grid
-from service.training.recipe_shards import RecipeFolder, RecipeShard
-from service.training.shards import ShardError, ShardFolder, quantize
+from training.recipe_grids import grid_digest, observation_grid
+from training.recipe_shards import RecipeFolder, RecipeShard
+from training.shards import ShardError, ShardFolder, quantize
 
 
 @dataclass

@@ -2,7 +2,7 @@
 network sees, shared by migration, verification, the render cache and training.
 
 A recipe's observation is a list of depth images and their camera poses; it is fused with the
-service's own TSDF code, exactly as packing fused raw depth (``service.training.grids``), so a
+service's own TSDF code, exactly as packing fused raw depth (``training.grids``), so a
 grid rendered from a recipe and a grid stored earlier compare voxel for voxel.
 """
 
@@ -12,7 +12,7 @@ import hashlib
 
 import numpy as np
 
-from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
+from training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
 from vgn_data.dataset import DatasetSetup, SceneViews
 
 #: How a grid's digest is taken (recorded in the manifest).

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from service.training.metrics import COLUMNS, format_metric
+from training.metrics import COLUMNS, format_metric
 
 
 def _shown(validation: bool) -> list[str]:

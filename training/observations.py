@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from service.training.grids import RESOLUTION
-from service.training.recipe_grids import observation_grid
-from service.training.recipe_shards import RecipeFolder
-from service.training.shards import quantize
+from training.grids import RESOLUTION
+from training.recipe_grids import observation_grid
+from training.recipe_shards import RecipeFolder
+from training.shards import quantize
 from vgn_data.files import atomic_writer
 
 #: Bump when rendering or fusing changes, so old caches stop matching.

@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from service.training.recipe_grids import grid_digest, observation_grid
-from service.training.shards import ShardFolder, quantize
+from training.recipe_grids import grid_digest, observation_grid
+from training.shards import ShardFolder, quantize
 from vgn_data.files import atomic_writer
 
 #: The renderer the repository's grid shards were made with: recipes are checked against it.

@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from service.training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
-from service.training.migrate import legacy_scenes, read_result
-from service.training.recipe_grids import grid_digest
-from service.training.recipe_shards import DEFAULT_SCENES_PER_SHARD, RecipeFolder, RecipeRecord
-from service.training.shards import ShardError, ShardFolder, quantize
+from training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
+from training.migrate import legacy_scenes, read_result
+from training.recipe_grids import grid_digest
+from training.recipe_shards import DEFAULT_SCENES_PER_SHARD, RecipeFolder, RecipeRecord
+from training.shards import ShardError, ShardFolder, quantize
 from vgn_data.dataset import RawDataset
 
 

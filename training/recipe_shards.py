@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from service.training.grids import MAX_DEPTH, RESOLUTION
-from service.training.recipe_grids import DIGEST
-from service.training.shards import ShardError, sha256_of
-from service.training.shards import _now as now
+from training.grids import MAX_DEPTH, RESOLUTION
+from training.recipe_grids import DIGEST
+from training.shards import ShardError, sha256_of
+from training.shards import _now as now
 from vgn_data.files import remove_stale_temporaries, write_atomically
 
 RECIPE_FORMAT = 2

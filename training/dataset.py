@@ -18,14 +18,14 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from service.training.augment import Placement, balanced_subset, draw_height, draw_shift
-from service.training.distill import SoftTargets
-from service.training.grids import GridSource, cache_dir, cache_key, ensure_cached
-from service.training.labels import LabelSet
-from service.training.observations import ObservationSettings, open_cache, render_cache
-from service.training.recipe_shards import RecipeFolder
-from service.training.shards import ShardFolder, dequantize
 from sim_worker.objects import default_cache_dir
+from training.augment import Placement, balanced_subset, draw_height, draw_shift
+from training.distill import SoftTargets
+from training.grids import GridSource, cache_dir, cache_key, ensure_cached
+from training.labels import LabelSet
+from training.observations import ObservationSettings, open_cache, render_cache
+from training.recipe_shards import RecipeFolder
+from training.shards import ShardFolder, dequantize
 from vgn_data.dataset import RawDataset
 from vgn_data.files import remove_stale_temporaries
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-from service.training.dataset import Batch
-from service.training.quaternions import flipped
+from training.dataset import Batch
+from training.quaternions import flipped
 
 #: Weight of the width term (VGN's).
 WIDTH_WEIGHT = 0.01

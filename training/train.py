@@ -25,10 +25,12 @@ from tqdm import tqdm
 
 from client.schemas import VGN_DEFAULT_THRESHOLD
 from service.planner import resolve_device
-from service.training import report
-from service.training.augment import MAX_Z_SHIFT
-from service.training.card import build_card, write_card, write_learning_curves
-from service.training.checkpoint import (
+from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
+from service.vgn.network import VGN
+from training import report
+from training.augment import MAX_Z_SHIFT
+from training.card import build_card, write_card, write_learning_curves
+from training.checkpoint import (
     TrainingState,
     capture_rng,
     checkpoint_path,
@@ -36,7 +38,7 @@ from service.training.checkpoint import (
     restore_rng,
     save_state,
 )
-from service.training.dataset import (
+from training.dataset import (
     DatasetSummary,
     RenderedObservations,
     Scene,
@@ -47,14 +49,12 @@ from service.training.dataset import (
     split_scenes,
     subsample_scenes,
 )
-from service.training.distill import SoftTargets, teach
-from service.training.grids import MAX_DEPTH, RESOLUTION
-from service.training.loss import distillation_loss, gather, per_label_loss
-from service.training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
-from service.training.observations import ObservationSettings
-from service.training.shards import ShardFolder, manifest_summary
-from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
-from service.vgn.network import VGN
+from training.distill import SoftTargets, teach
+from training.grids import MAX_DEPTH, RESOLUTION
+from training.loss import distillation_loss, gather, per_label_loss
+from training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
+from training.observations import ObservationSettings
+from training.shards import ShardFolder, manifest_summary
 from vgn_data.files import remove_stale_temporaries
 
 
@@ -95,7 +95,7 @@ class TrainConfig:
     target_precision: float = 0.8
     #: weights to start from instead of a random initialisation (fine-tuning, e.g. the shipped model)
     init: Path | None = None
-    #: weights whose turn-averaged output is distilled as soft labels (``service.training.distill``)
+    #: weights whose turn-averaged output is distilled as soft labels (``training.distill``)
     teacher: Path | None = None
     #: weight of the soft-label loss beside the trial labels' (both means over their labels)
     distill_weight: float = 1.0

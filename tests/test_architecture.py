@@ -1,0 +1,254 @@
+"""Import directions between the repository's packages (docs/architecture.md).
+
+The robot-side client stays light only while it imports none of the heavy packages, and the
+server stays deployable without the simulator only while ``service`` never reaches into
+``sim_worker`` or ``training``. Nothing at run time would notice a wrong import until someone
+installs the light client or builds the service image, so this test reads every module with
+``ast`` (module- and function-level imports, and ``importlib.import_module("...")`` calls) and
+names the file, line and import that break a rule.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import textwrap
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: What each package may import of the others (its own modules always). ``benchmarks`` may use
+#: anything, and is in no other package's set: nothing that ships may depend on a benchmark.
+RULES: dict[str, frozenset[str]] = {
+    "client": frozenset(),
+    "vgn_data": frozenset({"client"}),
+    "service": frozenset({"client", "vgn_data"}),
+    "sim_worker": frozenset({"client", "vgn_data"}),
+    "training": frozenset({"client", "vgn_data", "service", "sim_worker"}),
+    "benchmarks": frozenset({"client", "vgn_data", "service", "sim_worker", "training"}),
+}
+
+#: Modules a package names in a string to run them, not to import their code: ``vgn-client serve``
+#: starts the service with uvicorn, the embedded service is a child process, and ``vgn-client``'s
+#: ``clear-scene/generate-data --sim`` and ``clean-data`` hand their arguments to the package that
+#: owns the command, loaded only when the user runs it. A new entry here is a new runtime
+#: dependency of that file: add it on purpose, not to make the test pass.
+RUNTIME_DISPATCH: frozenset[tuple[str, str]] = frozenset(
+    {
+        ("client/cli.py", "service.app:app"),
+        ("client/cli.py", "sim_worker.clear_scene"),
+        ("client/cli.py", "sim_worker.generate_data"),
+        ("client/cli.py", "vgn_data.clean_data"),
+        ("client/embedded.py", "service.app:app"),
+    }
+)
+
+DOTTED = re.compile(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)+(:[A-Za-z_]\w*)?")
+
+
+@dataclass(frozen=True)
+class Reference:
+    """One place a module names another: ``how`` is import, importlib or string."""
+
+    path: str
+    line: int
+    module: str
+    how: str
+
+
+def module_name(root: Path, path: Path) -> str:
+    """``pkg/sub/mod.py`` -> ``pkg.sub.mod`` (a package's ``__init__`` is the package)."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def absolute(module: str | None, level: int, importer: str, is_package: bool) -> str:
+    """The absolute name a (possibly relative) ``from`` import refers to."""
+    if not level:
+        return module or ""
+    base = importer.split(".")
+    base = base[: len(base) - level + (1 if is_package else 0)]
+    return ".".join([*base, module] if module else base)
+
+
+def _not_references(tree: ast.Module) -> set[int]:
+    """Ids of string nodes that are no string reference: docstrings (prose may mention a
+    module) and the arguments of import calls (those are reported as importlib)."""
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Expr):
+            found.add(id(node.value))
+        elif isinstance(node, ast.Call) and _is_import_call(node):
+            found.update(id(arg) for arg in node.args)
+    return found
+
+
+def _is_string(node: ast.AST) -> bool:
+    return isinstance(node, ast.Constant) and isinstance(node.value, str)
+
+
+def _is_import_call(node: ast.Call) -> bool:
+    name = getattr(node.func, "attr", None) or getattr(node.func, "id", None)
+    return name in ("import_module", "__import__")
+
+
+def _names_module(root: Path, value: str) -> bool:
+    """Whether ``value`` (``pkg.mod`` or ``pkg.mod:attr``) is a module of this repository, so
+    file names such as ``service.log`` are not taken for one."""
+    if not DOTTED.fullmatch(value):
+        return False
+    target = root.joinpath(*value.split(":")[0].split("."))
+    return target.with_suffix(".py").is_file() or (target / "__init__.py").is_file()
+
+
+def references(root: Path, path: Path) -> Iterator[Reference]:
+    """Every module ``path`` imports or names for import, anywhere in the file."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    importer, rel = module_name(root, path), path.relative_to(root).as_posix()
+    is_package = path.name == "__init__.py"
+    skipped = _not_references(tree)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            yield from (Reference(rel, node.lineno, alias.name, "import") for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            target = absolute(node.module, node.level, importer, is_package)
+            yield Reference(rel, node.lineno, target, "import")
+        elif isinstance(node, ast.Call) and _is_import_call(node) and node.args:
+            if _is_string(node.args[0]):
+                yield Reference(rel, node.lineno, node.args[0].value, "importlib")
+        elif _is_string(node) and id(node) not in skipped and _names_module(root, node.value):
+            yield Reference(rel, node.lineno, node.value, "string")
+
+
+def violations(
+    root: Path,
+    rules: Mapping[str, frozenset[str]] = RULES,
+    dispatch: frozenset[tuple[str, str]] = RUNTIME_DISPATCH,
+) -> list[str]:
+    """One line per reference that runs against ``rules``: ``file:line: message``."""
+    found = []
+    for package, allowed in rules.items():
+        for path in sorted((root / package).rglob("*.py")):
+            for ref in references(root, path):
+                target = ref.module.split(":")[0].split(".")[0]
+                if target == package or target not in rules or target in allowed:
+                    continue
+                if ref.how == "string" and (ref.path, ref.module) in dispatch:
+                    continue
+                others = ", ".join(sorted(allowed)) or "none of the other packages"
+                found.append(
+                    f"{ref.path}:{ref.line}: {package} must not {_verb(ref.how)} {ref.module!r} "
+                    f"({package} may use: {others})"
+                )
+    return found
+
+
+def _verb(how: str) -> str:
+    return {"import": "import", "importlib": "load (importlib)", "string": "name for import"}[how]
+
+
+def top_level_packages(root: Path) -> set[str]:
+    """The repository's importable top-level packages (tests are not one that ships)."""
+    return {p.parent.name for p in root.glob("*/__init__.py")} - {"tests"}
+
+
+# The repository itself.
+
+
+def test_every_package_has_a_rule():
+    missing = top_level_packages(ROOT) - set(RULES)
+    assert not missing, f"add {sorted(missing)} to RULES here and to docs/architecture.md"
+
+
+def test_every_rule_names_a_package_with_modules():
+    for package in RULES:
+        assert list((ROOT / package).rglob("*.py")), f"{package}/ has no modules: is RULES out of date?"
+
+
+def test_imports_run_the_allowed_way():
+    found = violations(ROOT)
+    assert not found, "imports against docs/architecture.md:\n" + "\n".join(found)
+
+
+def test_runtime_dispatch_targets_exist():
+    """A stale entry would allow a string that no longer names anything."""
+    for path, module in RUNTIME_DISPATCH:
+        assert (ROOT / path).is_file(), path
+        assert _names_module(ROOT, module), module
+
+
+# The checker, on a small tree made up for the purpose.
+
+TOY_RULES = {"client": frozenset(), "service": frozenset({"client"}), "sim_worker": frozenset({"client"})}
+
+
+def _write(root: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        path = root / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(text))
+    return root
+
+
+def _toy(tmp_path: Path, extra: dict[str, str]) -> Path:
+    base = {
+        "client/__init__.py": "",
+        "client/schemas.py": "X = 1\n",
+        "service/__init__.py": "",
+        "service/app.py": "from client.schemas import X\n",
+        "sim_worker/__init__.py": "",
+        "sim_worker/world.py": "from client import schemas\n",
+    }
+    return _write(tmp_path, {**base, **extra})
+
+
+def test_checker_accepts_allowed_imports(tmp_path):
+    assert violations(_toy(tmp_path, {}), TOY_RULES, frozenset()) == []
+
+
+def test_checker_finds_a_module_level_import(tmp_path):
+    root = _toy(tmp_path, {"client/http.py": "import os\nimport service.app\n"})
+    assert violations(root, TOY_RULES, frozenset()) == [
+        "client/http.py:2: client must not import 'service.app' (client may use: none of the other packages)"
+    ]
+
+
+def test_checker_finds_a_function_level_import(tmp_path):
+    code = """
+        def run():
+            from sim_worker.world import step
+            return step
+    """
+    root = _toy(tmp_path, {"service/core.py": code})
+    (found,) = violations(root, TOY_RULES, frozenset())
+    assert found.startswith("service/core.py:3: service must not import 'sim_worker.world'")
+
+
+def test_checker_finds_an_importlib_call(tmp_path):
+    code = 'import importlib\n\nworld = importlib.import_module("sim_worker.world")\n'
+    root = _toy(tmp_path, {"service/core.py": code})
+    (found,) = violations(root, TOY_RULES, frozenset())
+    assert found.startswith("service/core.py:3: service must not load (importlib) 'sim_worker.world'")
+
+
+def test_checker_finds_a_module_named_in_a_string_unless_declared(tmp_path):
+    code = 'COMMANDS = {"step": "sim_worker.world"}\nLOG = "sim_worker.log"\n'
+    root = _toy(tmp_path, {"client/cli.py": code})
+    (found,) = violations(root, TOY_RULES, frozenset())
+    assert found.startswith("client/cli.py:1: client must not name for import 'sim_worker.world'")
+    assert violations(root, TOY_RULES, frozenset({("client/cli.py", "sim_worker.world")})) == []
+
+
+def test_checker_ignores_docstrings_and_resolves_relative_imports(tmp_path):
+    code = '"""Mentions sim_worker.world in prose."""\nfrom . import schemas\nfrom .schemas import X\n'
+    root = _toy(tmp_path, {"client/grpc.py": code})
+    assert violations(root, TOY_RULES, frozenset()) == []
+    assert absolute(None, 1, "client.grpc_api", True) == "client.grpc_api"
+    assert absolute("schemas", 2, "client.grpc_api.convert", False) == "client.schemas"
+
+
+def test_checker_ignores_imports_of_other_libraries(tmp_path):
+    root = _toy(tmp_path, {"client/http.py": "import numpy\nfrom pydantic import BaseModel\n"})
+    assert violations(root, TOY_RULES, frozenset()) == []
