@@ -138,6 +138,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="share of fresh observations with Dex-Net depth noise (default %(default)s)",
     )
     data.add_argument(
+        "--observation-sensor",
+        choices=["dex", "structured-light"],
+        default=ObservationSettings.sensor,
+        help="the depth errors of noisy fresh observations: Dex-Net noise or a structured-light camera's "
+        "(docs/sensors.md; default %(default)s)",
+    )
+    data.add_argument(
         "--observation-side-views",
         metavar="F",
         type=float,

@@ -81,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--noise-fraction", type=float, default=ObservationSettings.noise_fraction,
                         help="share of fresh observations with Dex-Net depth noise (default %(default)s)")  # fmt: skip
+    render.add_argument("--sensor", choices=["dex", "structured-light"], default=ObservationSettings.sensor,
+                        help="depth errors of the noisy fresh observations (default %(default)s)")  # fmt: skip
     render.add_argument("--side-view-fraction", type=float, default=ObservationSettings.side_view_fraction,
                         help="share of fresh observations that are one side view (default %(default)s)")  # fmt: skip
     render.add_argument("--no-original", dest="original", action="store_false",
@@ -136,7 +138,7 @@ def _render(args: argparse.Namespace) -> int:
     from training.recipe_shards import RecipeFolder
 
     settings = ObservationSettings(per_scene=args.per_scene, original=args.original,
-                                   noise_fraction=args.noise_fraction,
+                                   noise_fraction=args.noise_fraction, sensor=args.sensor,
                                    side_view_fraction=args.side_view_fraction)  # fmt: skip
     if args.workers < 1:
         raise ValueError("--workers must be >= 1")

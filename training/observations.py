@@ -33,6 +33,8 @@ from vgn_data.files import atomic_writer
 
 #: Bump when rendering or fusing changes, so old caches stop matching.
 OBSERVATION_FORMAT = 1
+#: Depth-sensor models a fresh observation may carry (docs/sensors.md).
+SENSORS = ("dex", "structured-light")
 #: Single side views look from this far off vertical (degrees), as data generation's.
 SIDE_VIEW_TILT_DEG = (45.0, 65.0)
 
@@ -44,8 +46,9 @@ class ObservationSettings:
     ``per_scene`` observations per scene; with ``original`` the first is the scene's original
     observation. The others take 1..``max_views`` views from above as data generation does
     (distance U(0.48, 0.72) m, tilt U(0°, 45°)), or with probability ``side_view_fraction`` one
-    side view (tilt U(45°, 65°)); with probability ``noise_fraction`` the depth carries Dex-Net
-    noise (``sim_worker.camera.DepthNoise``).
+    side view (tilt U(45°, 65°)); with probability ``noise_fraction`` the depth carries the
+    errors of ``sensor``: ``"dex"`` (Dex-Net noise, ``sim_worker.camera.DepthNoise``) or
+    ``"structured-light"`` (``sim_worker.sensors.StructuredLightNoise``; docs/sensors.md).
     """
 
     per_scene: int = 1
@@ -53,11 +56,14 @@ class ObservationSettings:
     max_views: int = 6
     side_view_fraction: float = 0.2
     noise_fraction: float = 0.5
+    sensor: str = "dex"
     seed: int = 0
 
     def __post_init__(self) -> None:
         if self.per_scene < 1 or self.max_views < 1:
             raise ValueError("per_scene and max_views must be >= 1")
+        if self.sensor not in SENSORS:
+            raise ValueError(f"sensor must be one of {SENSORS}, got {self.sensor!r}")
         for name in ("side_view_fraction", "noise_fraction"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
@@ -104,9 +110,19 @@ class ObservationRenderer:
             self.cameras[renderer] = Camera(World(renderer=renderer))  # type: ignore[arg-type]
         return self.cameras[renderer]
 
+    def noise(self) -> Any:
+        """The depth model of a noisy fresh observation."""
+        from sim_worker.camera import SIM_INTRINSICS, DepthNoise
+        from sim_worker.sensors import StructuredLightNoise
+
+        return (
+            StructuredLightNoise(SIM_INTRINSICS)
+            if self.settings.sensor == "structured-light"
+            else DepthNoise()
+        )
+
     def observations(self, recipe: Any) -> np.ndarray:
         """(K, N, N, N) uint8 observations of one recipe (a ``SceneRecipe``)."""
-        from sim_worker.camera import DepthNoise
         from sim_worker.recipes import pose_vector, rebuild, render_original, render_views
 
         camera = self._camera(recipe.renderer)
@@ -118,7 +134,7 @@ class ObservationRenderer:
             else:
                 rng = self.settings.rng(recipe.scene_id, slot)
                 poses, noisy = draw_cameras(self.settings, rng)
-                depths = render_views(camera, poses, DepthNoise() if noisy else None, rng)
+                depths = render_views(camera, poses, self.noise() if noisy else None, rng)
                 views = np.stack([pose_vector(c) for c in poses])
             grids.append(quantize(observation_grid(depths, views)))
         return np.stack(grids)

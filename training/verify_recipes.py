@@ -75,7 +75,9 @@ def grids_from_history(folder: Path, files: list[str], out: Path | None = None) 
         manifest = None
         for name in files:
             path = f"{prefix}{name}"
-            removed = git("log", "-1", "--format=%H", "--diff-filter=D", "--", path, where=top).decode().strip()
+            removed = (
+                git("log", "-1", "--format=%H", "--diff-filter=D", "--", path, where=top).decode().strip()
+            )
             revision = f"{removed}^" if removed else "HEAD"
             (out / name).parent.mkdir(parents=True, exist_ok=True)
             (out / name).write_bytes(git("show", f"{revision}:{path}", where=top))

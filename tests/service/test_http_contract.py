@@ -4,7 +4,7 @@ document (status codes, content types, headers, response schemas, Allow headers)
 nothing is a server error. Seeded and derandomized, so the cases are the same from run to run.
 
 The short run is ~130 requests; ``VGN_FUZZ_EXAMPLES=500 python3 -m pytest -m slow
-tests/service/test_http_contract.py`` runs a larger one (see README, Testing).
+tests/service/test_http_contract.py`` runs a larger one (see docs/development.md).
 """
 
 from __future__ import annotations

@@ -1,0 +1,37 @@
+"""The documentation's Python examples that plan on the sample scene run as written, with the
+service's address put in for the one the page shows."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from client.embedded import EmbeddedService
+
+ROOT = Path(__file__).resolve().parent.parent
+GRPC_PAGE = ROOT / "docs" / "grpc-api.md"
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedService]:
+    log = tmp_path_factory.mktemp("docs") / "service.log"
+    unset = ("VGN_MODEL", "VGN_API_KEY")
+    with EmbeddedService(env={"VGN_TORCH_THREADS": "1"}, unset=unset, log_path=log, grpc=True) as running:
+        yield running
+
+
+def test_the_grpc_page_example_runs(service: EmbeddedService):
+    blocks = re.findall(r"^```python\n(.*?)^```", GRPC_PAGE.read_text(), flags=re.S | re.M)
+    example = next(block for block in blocks if "sample_scene.npz" in block)
+    assert "grpc://127.0.0.1:50051" in example
+    code = example.replace("grpc://127.0.0.1:50051", service.grpc_url)
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert re.match(r"4 frames fused in [0-9.]+ ms", lines[0]), run.stdout
+    assert len(lines) >= 2, "and at least one grasp"

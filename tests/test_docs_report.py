@@ -1,0 +1,122 @@
+"""``python -m benchmarks.report`` on small synthetic result files: the tables carry the intervals
+and the date and machine of every figure, the README's block is replaced only where results exist,
+and ``--check`` tells a stale page from a current one."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from benchmarks import report
+
+ROW = {
+    "planner": "vgn+turns+clearance", "selection": "random", "scenario": "pile-5", "threshold": 0.8,
+    "model": "0123456789ab", "rounds": 100, "attempts": 386, "successes": 217, "success_rate": 56.2,
+    "success_rate_ci95": [51.2, 61.1], "objects_placed": 489, "objects_cleared": 217, "percent_cleared": 44.4,
+    "percent_cleared_ci95": [40.0, 48.8],
+    "outcomes": {"success": 217, "approach_contact": 72, "nothing_held": 7, "slipped": 90, "collision": 0},
+    "planning_ms": {"mean": 10.2, "p50": 9.9},
+    "measured": {"date": "2031-02-03", "cpu": "Example CPU 9000", "cores": 2},
+}  # fmt: skip
+README = "# x\n\nintro\n\n<!-- results:begin -->\nold table\n<!-- results:end -->\n\nafter\n"
+
+
+def clutter_results(
+    root: Path, rows: list[dict], settings: str = "seed 1, rounds per scenario 100, six view(s)"
+) -> Path:
+    folder = root / "bench-a"
+    folder.mkdir(parents=True)
+    (folder / "table.json").write_text(json.dumps(rows))
+    (folder / "table.md").write_text(f"{settings}\n\n| planner | ... |\n")
+    return folder
+
+
+def test_clutter_table_has_intervals_failures_and_where_it_was_measured(tmp_path: Path):
+    clutter_results(tmp_path, [ROW])
+    page = report.clutter_page(tmp_path)
+    assert "#### `bench-a`" in page
+    assert "seed 1, rounds per scenario 100, six view(s)" in page and "`0123456789ab`" in page
+    line = next(line for line in page.splitlines() if line.startswith("| vgn+turns+clearance"))
+    assert "56.2 (51.2-61.1)" in line and "44.4 (40.0-48.8)" in line
+    assert "| 72 / 7 / 90 / 0 |" in line and "| 10 |" in line and "62.3 / 46.4" in line
+    assert "2031-02-03, Example CPU 9000 (2 cores)" in line
+
+
+def test_a_row_without_a_record_takes_the_folders_measured_json(tmp_path: Path):
+    row = {key: value for key, value in ROW.items() if key != "measured"}
+    folder = clutter_results(tmp_path, [row])
+    assert "date and machine not recorded" in report.clutter_page(tmp_path)
+    (folder / "measured.json").write_text(json.dumps({"date": "2031-05-06", "cpu": "Other CPU", "cores": 16}))
+    assert "2031-05-06, Other CPU (16 cores)" in report.clutter_page(tmp_path)
+
+
+def test_headline_table_and_readme_block(tmp_path: Path):
+    noisy = tmp_path / "noise"
+    clutter_results(tmp_path, [ROW, {**ROW, "scenario": "blocks-5", "planner": "vgn"}])
+    clutter_results(noisy, [ROW], settings="seed 1, rounds per scenario 100, six view(s), depth noise")
+    table = report.headline_table(tmp_path)
+    assert "| scenario | `vgn+turns+clearance` | `vgn` | paper's VGN |" in table
+    lines = table.splitlines()
+    assert lines.index("| blocks-5 | - | 56.2 / 44.4 | 87.6 / 90.1 |") < lines.index(
+        "| pile-5 | 56.2 / 44.4 | - | 62.3 / 46.4 |"
+    ), "the paper's order of scenarios"
+    assert "| pile-5, depth noise | 56.2 / 44.4 | - | - |" in lines
+    assert "2031" not in table, "the README's table carries no dates (the benchmark page does)"
+    updated = report.readme_with_headline(README, table)
+    assert "old table" not in updated and table in updated and updated.endswith("after\n")
+    assert report.readme_with_headline(README, None) == README
+
+
+def test_latency_table_with_date_and_machine(tmp_path: Path):
+    folder = tmp_path / "latency-a"
+    folder.mkdir()
+    (folder / "latency.json").write_text(json.dumps({
+        "environment": {"cpu_count": 2, "device": "cpu", "repeats": 40, "torch": "2.13.0"},
+        "targets": [{"name": "grasp request p50 <= 25 ms", "value": 10.6, "passed": True}],
+        "results": [{"name": "grasp request over HTTP", "p50_ms": 10.58, "p95_ms": 13.3}],
+        "grpc": {"targets": [], "results": [{"name": "gRPC frame upload", "p50_ms": 5.2, "p95_ms": 6.0}]},
+    }))  # fmt: skip
+    assert "date and machine not recorded" in report.latency_page(tmp_path)
+    assert report.main(["--stamp", str(folder)]) == 0
+    page = report.latency_page(tmp_path)
+    stamp = json.loads((folder / "measured.json").read_text())
+    assert f"measured on {stamp['date']}, {stamp['cpu']} (" in page
+    assert (
+        "| grasp request over HTTP | 10.58 | 13.30 |" in page
+        and "| gRPC frame upload | 5.20 | 6.00 |" in page
+    )
+    assert "| grasp request p50 <= 25 ms | 10.6 | pass |" in page
+
+
+def test_no_results_say_how_to_add_them(tmp_path: Path):
+    assert "No clutter-removal result files" in report.clutter_page(tmp_path)
+    assert "No latency result files" in report.latency_page(tmp_path)
+    assert report.headline_table(tmp_path) is None
+
+
+def test_the_command_writes_then_checks(tmp_path: Path):
+    results, out, readme = tmp_path / "results", tmp_path / "generated", tmp_path / "README.md"
+    clutter_results(results, [ROW])
+    readme.write_text(README)
+    argv = [str(results), "--out", str(out), "--readme", str(readme)]
+    assert report.main([*argv, "--check"]) == 1, "nothing generated yet"
+    assert report.main(argv) == 0
+    assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md",
+                                               "http-endpoints.md", "model-card.md"}  # fmt: skip
+    assert "| `vgn+turns+clearance` |" in readme.read_text()
+    assert "`VGN_TURN_AVERAGE`" in (out / "configuration.md").read_text()
+    assert "### `GET /sessions/{session_id}/grasps`" in (out / "http-endpoints.md").read_text()
+    assert report.main([*argv, "--check"]) == 0
+    (out / "clutter.md").write_text("edited by hand\n")
+    assert report.main([*argv, "--check"]) == 1
+
+
+def test_the_clutter_benchmark_records_date_and_machine(tmp_path: Path):
+    from benchmarks.clutter import measured_on
+
+    folder = tmp_path / "vgn-random-pile-5"
+    folder.mkdir()
+    assert measured_on(folder) == {"date": None, "cpu": None, "cores": None}
+    recorded = measured_on(folder, record=True)
+    assert recorded == report.this_machine() and recorded["cpu"] and recorded["cores"]
+    assert measured_on(folder) == recorded, "read back by --report"
