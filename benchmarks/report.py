@@ -40,6 +40,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "docs" / "results"
 GENERATED = ROOT / "docs" / "generated"
+DATA_MANIFEST = ROOT / "data" / "manifest.json"
 README = ROOT / "README.md"
 OPENAPI = ROOT / "openapi.json"
 CARD = ROOT / "service" / "models" / "vgn.card.json"
@@ -522,12 +523,61 @@ def card_page(card: dict[str, Any]) -> str:
     return "\n".join(parts)
 
 
+# Training data ----------------------------------------------------------------------------------
+def training_data_page(manifest: dict[str, Any], results: Path) -> str:
+    """What ``data/`` holds (from its manifest), what the conversion from grid shards kept, and
+    what training from recipes costs (``recipe-training.json`` result files)."""
+    totals: dict[str, list[int]] = {}
+    for shard in manifest.get("shards", []):
+        row = totals.setdefault(shard["source"], [0, 0, 0, 0])
+        for i, key in enumerate(("scenes", "grasps", "positives", "bytes")):
+            row[i] += shard[key]
+    lines = ["| source | scenes | labels | positive | size |", "| --- | ---: | ---: | ---: | ---: |"]
+    for source, (scenes, grasps, positives, size) in sorted(totals.items()):
+        share = f"{100 * positives / grasps:.1f} %" if grasps else "-"
+        lines.append(f"| {source} | {scenes:,} | {grasps:,} | {share} | {size / 1e6:.1f} MB |")
+    all_scenes, all_bytes = sum(t[0] for t in totals.values()), sum(t[3] for t in totals.values())
+    lines.append(
+        f"| all | {all_scenes:,} | {sum(t[1] for t in totals.values()):,} | | {all_bytes / 1e6:.1f} MB |"
+    )
+    parts = [f"`data/manifest.json`: hand `{manifest.get('gripper')}`, {len(manifest.get('shards', []))} shards, "
+             f"{all_bytes / max(all_scenes, 1) / 1e3:.1f} kB a scene.", "", *lines]  # fmt: skip
+    migration = manifest.get("migration") or {}
+    if migration:
+        parts += ["", "Converted from the earlier grid shards (only scenes whose rebuilt observation equals the "
+                  "stored grid voxel for voxel):", "", "| source | scenes | converted | not converted, why |",
+                  "| --- | ---: | ---: | --- |"]  # fmt: skip
+        for source, record in sorted(migration.items()):
+            why = (
+                "; ".join(f"{count:,}: {reason}" for reason, count in record["not_converted"].items()) or "-"
+            )
+            parts.append(f"| {source} | {record['scenes']:,} | {record['converted']:,} | {why} |")
+    for path in sorted(results.glob("**/recipe-training.json")):
+        run = json.loads(path.read_text())
+        render, epoch = run["rendering"], run["epoch"]
+        median = {arm: sorted(values)[len(values) // 2] for arm, values in epoch["seconds"].items()}
+        parts += ["", f"Training from recipes, `{relative(path.parent, ROOT)}` ({machine_text(sidecar(path.parent))}):",
+                  "", "| measure | value |", "| --- | --- |",
+                  f"| rendering ({render['workers']} workers, {render['per_scene']} observations a scene) | "
+                  f"{render['scenes_per_s']} scenes/s, {render['observations_per_s']} observations/s |",
+                  f"| one epoch over {epoch['scenes']} scenes from stored grids | {median['grids']:.0f} s "
+                  f"(runs: {', '.join(f'{v:.0f}' for v in epoch['seconds']['grids'])}) |",
+                  f"| the same from recipes, {epoch['observations']} observations a scene | {median['recipes']:.0f} s "
+                  f"(runs: {', '.join(f'{v:.0f}' for v in epoch['seconds']['recipes'])}) |",
+                  f"| ratio, recipes / grids (target ≤ {epoch['target']}) | {epoch['ratio']:.2f} |"]  # fmt: skip
+    return "\n".join(parts) + "\n"
+
+
 # Main -----------------------------------------------------------------------------------------
 def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
     """Generated file name -> (its source, for the header; the function that makes its text)."""
     return {
         "clutter.md": ("docs/results/**/table.json", lambda: clutter_page(results)),
         "latency.md": ("docs/results/**/latency.json", lambda: latency_page(results)),
+        "training-data.md": (
+            "data/manifest.json, docs/results/**/recipe-training.json",
+            lambda: training_data_page(json.loads(DATA_MANIFEST.read_text()), results),
+        ),
         "configuration.md": ("service/settings.py", configuration_page),
         "http-endpoints.md": ("openapi.json", lambda: endpoints_page(json.loads(OPENAPI.read_text()))),
         "model-card.md": ("service/models/vgn.card.json", lambda: card_page(json.loads(CARD.read_text()))),
