@@ -203,15 +203,27 @@ def is_noisy(folder: Path, row: dict[str, Any]) -> bool:
     return any(json.loads(path.read_text()).get("noise") for path in configs)
 
 
+def shipped_model_id() -> str | None:
+    """The weights id of the packaged model (its card's), which the README's table is about."""
+    try:
+        return json.loads(CARD.read_text())["model"]["weights_id"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def headline_table(results: Path) -> str | None:
     """The README's table: success / cleared per scenario (rows) and planner (columns), from the
-    newest run of each, random selection (the paper's), next to the paper's VGN; None without results."""
+    newest run of each, random selection (the paper's), next to the paper's VGN; only runs of the
+    packaged weights (and the weight-free baseline); None without results."""
     cells: dict[tuple[str, str], tuple[str, str]] = {}  # (scenario, planner) -> (date, text)
     planners: list[str] = []
+    shipped = shipped_model_id()
     for folder, rows in clutter_runs(results):
         for row in rows:
             if row.get("selection", "random") != "random" or row.get("success_rate") is None:
                 continue
+            if row.get("model") not in (shipped, "antipodal"):
+                continue  # other weights (experiments) have their own pages
             scenario = row["scenario"] + (", depth noise" if is_noisy(folder, row) else "")
             date = str((row_measured(row, folder) or {}).get("date") or "")
             text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f}"
@@ -552,6 +564,7 @@ def training_data_page(manifest: dict[str, Any], results: Path) -> str:
                 "; ".join(f"{count:,}: {reason}" for reason, count in record["not_converted"].items()) or "-"
             )
             parts.append(f"| {source} | {record['scenes']:,} | {record['converted']:,} | {why} |")
+    parts += paired_comparison(results)
     for path in sorted(results.glob("**/recipe-training.json")):
         run = json.loads(path.read_text())
         render, epoch = run["rendering"], run["epoch"]
@@ -566,6 +579,38 @@ def training_data_page(manifest: dict[str, Any], results: Path) -> str:
                   f"(runs: {', '.join(f'{v:.0f}' for v in epoch['seconds']['recipes'])}) |",
                   f"| ratio, recipes / grids (target ≤ {epoch['target']}) | {epoch['ratio']:.2f} |"]  # fmt: skip
     return "\n".join(parts) + "\n"
+
+
+def paired_comparison(results: Path) -> list[str]:
+    """The paired comparison of training observations, from the clutter result folders named
+    ``paired-<arm>`` (one setting each, e.g. ``paired-fresh-noise``): a row per arm, a column per
+    scenario and sensor setting."""
+    runs = [(folder, rows) for folder, rows in clutter_runs(results) if folder.name.startswith("paired-")]
+    if not runs:
+        return []
+    arms: list[str] = []
+    columns: list[str] = []
+    cells: dict[tuple[str, str], str] = {}
+    measured: dict[str, str] = {}
+    for folder, rows in runs:
+        arm = folder.name.removeprefix("paired-").removesuffix("-noise")
+        arms += [arm] if arm not in arms else []
+        for row in rows:
+            column = row["scenario"] + (", depth noise" if is_noisy(folder, row) else "")
+            columns += [column] if column not in columns else []
+            cells[arm, column] = (
+                f"{pct(row['success_rate'], row.get('success_rate_ci95'))}, {row['rounds']} rounds"
+            )
+            measured[arm] = machine_text(row_measured(row, folder))
+    lines = ["", "Paired comparison: the same scenes, seeds and training recipe, success % (95 % interval) on "
+             "objects never trained on, random selection:", "",
+             "| training observations | " + " | ".join(columns) + " | measured |",
+             "| --- |" + " --- |" * (len(columns) + 1)]  # fmt: skip
+    for arm in arms:
+        lines.append(
+            f"| {arm} | " + " | ".join(cells.get((arm, c), "-") for c in columns) + f" | {measured[arm]} |"
+        )
+    return lines
 
 
 # Main -----------------------------------------------------------------------------------------

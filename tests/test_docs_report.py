@@ -50,7 +50,8 @@ def test_a_row_without_a_record_takes_the_folders_measured_json(tmp_path: Path):
     assert "2031-05-06, Other CPU (16 cores)" in report.clutter_page(tmp_path)
 
 
-def test_headline_table_and_readme_block(tmp_path: Path):
+def test_headline_table_and_readme_block(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     noisy = tmp_path / "noise"
     clutter_results(tmp_path, [ROW, {**ROW, "scenario": "blocks-5", "planner": "vgn"}])
     clutter_results(noisy, [ROW], settings="seed 1, rounds per scenario 100, six view(s), depth noise")
@@ -94,7 +95,8 @@ def test_no_results_say_how_to_add_them(tmp_path: Path):
     assert report.headline_table(tmp_path) is None
 
 
-def test_the_command_writes_then_checks(tmp_path: Path):
+def test_the_command_writes_then_checks(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     results, out, readme = tmp_path / "results", tmp_path / "generated", tmp_path / "README.md"
     clutter_results(results, [ROW])
     readme.write_text(README)
@@ -102,7 +104,7 @@ def test_the_command_writes_then_checks(tmp_path: Path):
     assert report.main([*argv, "--check"]) == 1, "nothing generated yet"
     assert report.main(argv) == 0
     assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md",
-                                               "http-endpoints.md", "model-card.md"}  # fmt: skip
+                                               "http-endpoints.md", "model-card.md", "training-data.md"}  # fmt: skip
     assert "| `vgn+turns+clearance` |" in readme.read_text()
     assert "`VGN_TURN_AVERAGE`" in (out / "configuration.md").read_text()
     assert "### `GET /sessions/{session_id}/grasps`" in (out / "http-endpoints.md").read_text()
@@ -120,3 +122,25 @@ def test_the_clutter_benchmark_records_date_and_machine(tmp_path: Path):
     recorded = measured_on(folder, record=True)
     assert recorded == report.this_machine() and recorded["cpu"] and recorded["cores"]
     assert measured_on(folder) == recorded, "read back by --report"
+
+
+def test_the_readme_table_shows_the_packaged_weights_only(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: "shipped00000")
+    clutter_results(tmp_path, [ROW, {**ROW, "model": "shipped00000", "scenario": "packed-5"}])
+    table = report.headline_table(tmp_path)
+    assert "| packed-5 | 56.2 / 44.4 |" in table and "pile-5" not in table  # ROW's weights are an experiment's
+
+
+def test_paired_comparison_rows_per_arm_and_columns_per_setting(tmp_path: Path):
+    clutter_results(tmp_path, [ROW])  # not a paired-<arm> folder: left out
+    noisy = "seed 1, rounds per scenario 100, six view(s), depth noise"
+    for arm, rate in (("fixed", 25.7), ("fresh", 40.0)):
+        for suffix, settings in (("", "seed 1, rounds per scenario 100, six view(s)"), ("-noise", noisy)):
+            folder = tmp_path / f"paired-{arm}{suffix}"
+            folder.mkdir()
+            (folder / "table.json").write_text(json.dumps([{**ROW, "success_rate": rate + (0 if suffix else 20)}]))
+            (folder / "table.md").write_text(f"{settings}\n\n| planner | ... |\n")
+    header, _, *rows = [line for line in report.paired_comparison(tmp_path) if line.startswith("| ")]
+    assert header == "| training observations | pile-5 | pile-5, depth noise | measured |"
+    assert rows[0].startswith("| fixed | 45.7 (51.2-61.1), 100 rounds | 25.7 (51.2-61.1), 100 rounds |")
+    assert rows[1].startswith("| fresh | 60.0") and "2031-02-03" in rows[1] and len(rows) == 2
