@@ -40,7 +40,8 @@ and checks the project's targets:
 * a frame request over HTTP (raw float32) has p50 <= 5 ms;
 * a grasp request over HTTP has p50 <= 25 ms, and is >= 3x faster than the naive forward +
   detection measured in the same run;
-* the second server's grasp p50 is within 1.5x of the first's (the default start is steady);
+* the second server's grasp p50 is within 1.3x of the first's, and the grasp request's p95 within
+  1.6x of its p50 (the default start is steady);
 * on a GPU only: grasp p50 <= 5 ms and 32 sessions get >= 8x the throughput of one.
 * gRPC: frame upload p50 no slower than HTTP's, streamed frames >= 150 per second.
 
@@ -124,7 +125,9 @@ FRAME_TARGET_MS = 5.0
 GRASP_TARGET_MS = 25.0
 GPU_GRASP_TARGET_MS = 5.0
 SPEEDUP_TARGET = 3.0
-STEADY_TARGET = 1.5
+STEADY_TARGET = 1.3
+#: The default grasp request's p95 at most this multiple of its p50 (steady, not only fast).
+TAIL_TARGET = 1.6
 THROUGHPUT_TARGET = 8.0
 CONCURRENCY = (1, 8, 32)
 #: Variables that would override the service's own choice of runtime settings.
@@ -148,6 +151,7 @@ FORWARD = "VGN forward, naive fp32 eager (inference_mode)"
 FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
 GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
+GRASPS_HTTP_KEPT_AGAIN = "VGNClient.grasps, no new frame (second server)"
 DETECTION = f"detect_grasps (threshold {THRESHOLD})"
 FORWARD_DETECTION = "forward + detection"
 PLAN = "PlanningService.plan (service default)"
@@ -645,6 +649,7 @@ def targets(rows: list[Measurement], concurrency: list[dict[str, Any]], gpu: boo
             "x",
             STEADY_TARGET,
         ),  # fmt: skip
+        check("grasp request over HTTP p95 / p50", find(rows, GRASPS_HTTP).p95 / grasp, "x", TAIL_TARGET),
     ]
     if gpu and concurrency:
         checks.append(
@@ -836,13 +841,19 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
+        kept_again, _ = http_grasp_operation(
+            second, frames, GRASPS_HTTP_KEPT_AGAIN, "7 steadiness", new_frame=False
+        )
         grasps_other, _ = http_grasp_operation(client, frames, other_way(GRASPS_HTTP, other), switches=other)
         operations = (
             fusion_operations(frames)
             + core_frame_operations(core, frames)
             + http_frame_operations(client, frames)
             + network
-            + [plan, plan_other, grasps_http, grasps_other, grasps_kept, grasps_again]
+            # The two servers' default requests are compared for steadiness, so each follows the
+            # same light request on its own server: what runs just before a request (in-process
+            # planning here) slows it by a few milliseconds on 2 cores.
+            + [plan, plan_other, grasps_other, grasps_kept, grasps_http, kept_again, grasps_again]
         )
         schedule = run_interleaved if args.schedule == "interleaved" else run_blocks
         rows = schedule(operations, args.repeats, args.warmup)
