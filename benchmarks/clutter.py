@@ -82,7 +82,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
-    parser.add_argument("--noise", action="store_true", help="Dex-Net depth noise on every view (a real sensor)")
+    parser.add_argument(
+        "--noise", action="store_true", help="Dex-Net depth noise on every view (a real sensor)"
+    )
     parser.add_argument("--sensor", choices=["dex", "structured-light"],
                         help="a depth sensor's errors on every view (docs/sensors.md); results go to folders ending in "
                         "-dex or -structured-light")  # fmt: skip

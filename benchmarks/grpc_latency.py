@@ -30,7 +30,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from benchmarks.latency import (
+from benchmarks.timing import Measurement, Operation, find, run_blocks, run_interleaved
+from benchmarks.workload import (
     INTRINSICS,
     MAX_DEPTH,
     RESOLUTION,
@@ -38,11 +39,6 @@ from benchmarks.latency import (
     THRESHOLD,
     WORKSPACE_SIZE,
     Frames,
-    Measurement,
-    Operation,
-    find,
-    run_blocks,
-    run_interleaved,
 )
 from client.embedded import EmbeddedService
 from client.grpc_client import GRPCClient

@@ -42,7 +42,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from benchmarks.latency import Measurement, Operation, run_interleaved
+from benchmarks.timing import Measurement, Operation, run_interleaved
 from service.planner import native_bf16
 from service.runtime import configured_threads
 from service.settings import PACKAGED_MODEL
@@ -228,7 +228,7 @@ def check_agreement(forms: list[Form], grids: list[tuple[str, np.ndarray]]) -> N
 def time_interleaved(
     forms: list[Form], grids: list[tuple[str, np.ndarray]], repeats: int, warmup: int
 ) -> None:
-    """Time every form once per round (``benchmarks.latency``'s schedule), on the grids in turn."""
+    """Time every form once per round (``benchmarks.timing``'s interleaved schedule), on the grids in turn."""
 
     def on_grid(form: Form) -> Callable[[int], object]:
         return lambda i: form.forward(grids[i % len(grids)][1])

@@ -81,16 +81,15 @@ import http.client
 import json
 import os
 import platform
-import statistics
 import sys
 import tempfile
 import threading
 import time
 import urllib.parse
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -99,8 +98,21 @@ import numpy as np
 import open3d as o3d
 import torch
 
+from benchmarks.timing import Measurement, Operation, find, run_blocks, run_interleaved, timed
+from benchmarks.workload import (
+    DEPTH_SCALE,
+    INTRINSICS,
+    MAX_DEPTH,
+    RESOLUTION,
+    RUNTIME_VARIABLES,
+    THRESHOLD,
+    VIEWS,
+    WORKSPACE_SIZE,
+    Frames,
+    render_frames,
+)
 from client.embedded import EmbeddedService
-from client.http import FRAME_META_HEADER, VGNClient, encode_depth
+from client.http import FRAME_META_HEADER, VGNClient
 from client.schemas import SWITCHES, FrameMeta, GraspQuery, Pose, SessionCreate
 from service.core import PlanningService
 from service.planner import resolve_device, resolve_precision
@@ -111,16 +123,9 @@ from service.vgn.checkpoint import load_vgn, save_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import VGN
-from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 warnings.filterwarnings("ignore", category=DeprecationWarning)
 
-WORKSPACE_SIZE = 0.3
-RESOLUTION = 40
-MAX_DEPTH = 2.0
-DEPTH_SCALE = 1000.0  # PNG units per metre: millimetres
-THRESHOLD = 0.9
-VIEWS = 6
 FRAME_TARGET_MS = 5.0
 GRASP_TARGET_MS = 25.0
 GPU_GRASP_TARGET_MS = 5.0
@@ -130,14 +135,6 @@ STEADY_TARGET = 1.3
 TAIL_TARGET = 1.6
 THROUGHPUT_TARGET = 8.0
 CONCURRENCY = (1, 8, 32)
-#: Variables that would override the service's own choice of runtime settings.
-RUNTIME_VARIABLES = (
-    "VGN_TORCH_THREADS",
-    "VGN_PRECISION",
-    "VGN_INFERENCE",
-    "OMP_WAIT_POLICY",
-    "GOMP_SPINCOUNT",
-)
 RAW_MEDIA_TYPE = "application/octet-stream"
 PNG_MEDIA_TYPE = "image/png"
 
@@ -177,88 +174,6 @@ def other_way(operation: str, options: dict[str, bool]) -> str:
 
 
 # Measurement -------------------------------------------------------------------------------
-@dataclass
-class Operation:
-    """One thing to time: ``call(i)`` is the i-th call (warm-up calls included)."""
-
-    name: str
-    group: str
-    call: Callable[[int], object]
-    note: str = ""
-    #: Untimed, just before each call (e.g. a new frame, so the call cannot reuse old work).
-    prepare: Callable[[int], object] | None = None
-
-
-@dataclass
-class Measurement:
-    """Latency samples (ms) of one named operation."""
-
-    name: str
-    group: str
-    samples_ms: list[float] = field(default_factory=list)
-    note: str = ""
-
-    def percentile(self, q: float) -> float:
-        """The ``q``-th percentile of the samples in ms; NaN before any sample."""
-        return float(np.percentile(self.samples_ms, q)) if self.samples_ms else float("nan")
-
-    @property
-    def p50(self) -> float:
-        """Median latency in ms."""
-        return self.percentile(50)
-
-    @property
-    def p95(self) -> float:
-        """95th-percentile latency in ms: the slow tail a robot waits for."""
-        return self.percentile(95)
-
-    def as_dict(self) -> dict[str, Any]:
-        """The row for the JSON report: percentiles, mean, count and the raw samples."""
-        mean = statistics.fmean(self.samples_ms) if self.samples_ms else float("nan")
-        return {
-            "name": self.name,
-            "group": self.group,
-            "p50_ms": round(self.p50, 4),
-            "p95_ms": round(self.p95, 4),
-            "mean_ms": round(mean, 4),
-            "n": len(self.samples_ms),
-            "note": self.note,
-            "samples_ms": self.samples_ms,
-        }
-
-
-def timed(call: Callable[[int], object], i: int, prepare: Callable[[int], object] | None = None) -> float:
-    """Milliseconds ``call(i)`` takes (after an untimed ``prepare(i)``)."""
-    if prepare is not None:
-        prepare(i)
-    started = time.perf_counter()
-    call(i)
-    return (time.perf_counter() - started) * 1e3
-
-
-def run_interleaved(operations: list[Operation], repeats: int, warmup: int) -> list[Measurement]:
-    """Round-robin: each round calls every operation once; the first ``warmup`` rounds are
-    not recorded."""
-    rows = [Measurement(op.name, op.group, note=op.note) for op in operations]
-    for i in range(warmup + repeats):
-        for op, row in zip(operations, rows, strict=True):
-            elapsed = timed(op.call, i, op.prepare)
-            if i >= warmup:
-                row.samples_ms.append(elapsed)
-    return rows
-
-
-def run_blocks(operations: list[Operation], repeats: int, warmup: int) -> list[Measurement]:
-    """Each operation's ``warmup`` untimed and ``repeats`` timed calls back to back."""
-    rows = []
-    for op in operations:
-        for i in range(warmup):
-            timed(op.call, i, op.prepare)
-        samples = [timed(op.call, i, op.prepare) for i in range(warmup, warmup + repeats)]
-        rows.append(Measurement(op.name, op.group, samples, op.note))
-    return rows
-
-
 def sum_of(name: str, parts: list[Measurement], note: str = "") -> Measurement:
     """Per-iteration sum of operations that ran one after the other in each iteration."""
     samples = [sum(values) for values in zip(*(p.samples_ms for p in parts), strict=True)]
@@ -266,35 +181,6 @@ def sum_of(name: str, parts: list[Measurement], note: str = "") -> Measurement:
 
 
 # Inputs --------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Frames:
-    """The benchmark's depth frames, one per view, in every form the service accepts."""
-
-    poses: list[np.ndarray]  # camera -> world (= workspace: the workspace sits at the origin)
-    depths: list[np.ndarray]  # (H, W) float32 metres
-    millimetres: list[np.ndarray]  # (H, W) uint16
-    raw: list[bytes]  # little-endian float32
-    png: list[bytes]  # 16-bit PNG of ``millimetres``
-
-    def __len__(self) -> int:
-        return len(self.poses)
-
-
-def render_frames(count: int = VIEWS) -> Frames:
-    """The ``BoxScene`` rendered from ``count`` views around it, in every upload form."""
-    scene = BoxScene()
-    poses = circle_views(count)
-    depths = [scene.depth(pose, INTRINSICS) for pose in poses]
-    millimetres = [np.round(d * DEPTH_SCALE).astype(np.uint16) for d in depths]
-    return Frames(
-        poses,
-        depths,
-        millimetres,
-        [encode_depth(d)[0] for d in depths],
-        [encode_depth(m)[0] for m in millimetres],
-    )
-
-
 def weights_path(model: Path | None, directory: Path) -> tuple[Path, bool]:
     """The weights to benchmark and whether they are random (then written to ``directory``)."""
     if model is not None:
@@ -611,11 +497,6 @@ def concurrency_rows(url: str, frames: Frames, requests: int) -> list[dict[str, 
 
 
 # Report ------------------------------------------------------------------------------------
-def find(rows: list[Measurement], name: str) -> Measurement:
-    """The row called ``name`` (StopIteration when the run did not measure it)."""
-    return next(row for row in rows if row.name == name)
-
-
 def check(name: str, value: float, unit: str, target: float, at_most: bool = True) -> dict[str, Any]:
     """One target check: the value, its target and whether it
     passed (``at_most``: the value must not exceed it)."""

@@ -114,7 +114,12 @@ def references(root: Path, path: Path) -> Iterator[Reference]:
             yield from (Reference(rel, node.lineno, alias.name, "import") for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
             target = absolute(node.module, node.level, importer, is_package)
-            yield Reference(rel, node.lineno, target, "import")
+            # ``from pkg import mod`` imports the module ``pkg.mod``: name it, so that a check
+            # between modules (the cycle check below) sees it, not only the package.
+            modules = [f"{target}.{a.name}" for a in node.names if _names_module(root, f"{target}.{a.name}")]
+            if len(modules) < len(node.names):
+                modules.append(target)
+            yield from (Reference(rel, node.lineno, module, "import") for module in modules)
         elif isinstance(node, ast.Call) and _is_import_call(node) and node.args:
             if _is_string(node.args[0]):
                 yield Reference(rel, node.lineno, node.args[0].value, "importlib")
@@ -149,6 +154,36 @@ def _verb(how: str) -> str:
     return {"import": "import", "importlib": "load (importlib)", "string": "name for import"}[how]
 
 
+def import_graph(root: Path, package: str) -> dict[str, set[str]]:
+    """Which of ``package``'s modules each of its modules imports (importlib included; a module
+    named in a string is run, not imported, and the package's ``__init__`` is left out)."""
+    modules = {module_name(root, path): path for path in sorted((root / package).rglob("*.py"))}
+    graph = {}
+    for name, path in modules.items():
+        imported = {ref.module for ref in references(root, path) if ref.how != "string"}
+        graph[name] = {module for module in imported if module in modules and module not in (name, package)}
+    return graph
+
+
+def import_cycles(graph: Mapping[str, set[str]]) -> list[list[str]]:
+    """One cycle per module that starts one, as ``[a, b, ..., a]``: a depth-first search that
+    reports each edge back to a module still on its path."""
+    cycles, done = [], set()
+
+    def visit(module: str, path: list[str]) -> None:
+        for imported in sorted(graph.get(module, ())):
+            if imported in path:
+                cycles.append([*path[path.index(imported) :], imported])
+            elif imported not in done:
+                visit(imported, [*path, imported])
+        done.add(module)
+
+    for module in sorted(graph):
+        if module not in done:
+            visit(module, [module])
+    return cycles
+
+
 def top_level_packages(root: Path) -> set[str]:
     """The repository's importable top-level packages (tests are not one that ships)."""
     return {p.parent.name for p in root.glob("*/__init__.py")} - {"tests"}
@@ -170,6 +205,19 @@ def test_every_rule_names_a_package_with_modules():
 def test_imports_run_the_allowed_way():
     found = violations(ROOT)
     assert not found, "imports against docs/architecture.md:\n" + "\n".join(found)
+
+
+def test_grpc_latency_does_not_import_latency():
+    """``benchmarks.latency`` adds the gRPC rows to its report: the dependency runs one way, and
+    what both use lives in ``benchmarks.timing`` and ``benchmarks.workload``."""
+    graph = import_graph(ROOT, "benchmarks")
+    assert "benchmarks.grpc_latency" in graph["benchmarks.latency"]
+    assert "benchmarks.latency" not in graph["benchmarks.grpc_latency"]
+
+
+def test_no_benchmark_imports_one_that_imports_it_back():
+    cycles = import_cycles(import_graph(ROOT, "benchmarks"))
+    assert not cycles, "import cycles among benchmarks modules:\n" + "\n".join(" -> ".join(c) for c in cycles)
 
 
 def test_runtime_dispatch_targets_exist():
@@ -252,3 +300,22 @@ def test_checker_ignores_docstrings_and_resolves_relative_imports(tmp_path):
 def test_checker_ignores_imports_of_other_libraries(tmp_path):
     root = _toy(tmp_path, {"client/http.py": "import numpy\nfrom pydantic import BaseModel\n"})
     assert violations(root, TOY_RULES, frozenset()) == []
+
+
+def test_checker_names_a_module_imported_from_its_package(tmp_path):
+    code = "from client import schemas\nfrom client.schemas import X\n"
+    refs = list(references(_toy(tmp_path, {"service/core.py": code}), tmp_path / "service/core.py"))
+    assert [ref.module for ref in refs] == ["client.schemas", "client.schemas"]
+
+
+def test_checker_finds_an_import_cycle_between_modules(tmp_path):
+    files = {
+        "service/a.py": "def late():\n    from service import b\n",
+        "service/b.py": "from service.c import Y\n",
+        "service/c.py": "import importlib\n\nY = importlib.import_module('service.a')\n",
+        "service/d.py": "from service import a\nRUN = 'service.d'\n",
+    }
+    graph = import_graph(_toy(tmp_path, files), "service")
+    assert graph["service.a"] == {"service.b"} and graph["service.d"] == {"service.a"}
+    assert import_cycles(graph) == [["service.a", "service.b", "service.c", "service.a"]]
+    assert import_cycles({"a": {"b"}, "b": set(), "c": {"a", "b"}}) == []

@@ -128,7 +128,9 @@ def test_the_readme_table_shows_the_packaged_weights_only(tmp_path: Path, monkey
     monkeypatch.setattr(report, "shipped_model_id", lambda: "shipped00000")
     clutter_results(tmp_path, [ROW, {**ROW, "model": "shipped00000", "scenario": "packed-5"}])
     table = report.headline_table(tmp_path)
-    assert "| packed-5 | 56.2 / 44.4 |" in table and "pile-5" not in table  # ROW's weights are an experiment's
+    assert (
+        "| packed-5 | 56.2 / 44.4 |" in table and "pile-5" not in table
+    )  # ROW's weights are an experiment's
 
 
 def test_paired_comparison_rows_per_arm_and_columns_per_setting(tmp_path: Path):
@@ -138,7 +140,9 @@ def test_paired_comparison_rows_per_arm_and_columns_per_setting(tmp_path: Path):
         for suffix, settings in (("", "seed 1, rounds per scenario 100, six view(s)"), ("-noise", noisy)):
             folder = tmp_path / f"paired-{arm}{suffix}"
             folder.mkdir()
-            (folder / "table.json").write_text(json.dumps([{**ROW, "success_rate": rate + (0 if suffix else 20)}]))
+            (folder / "table.json").write_text(
+                json.dumps([{**ROW, "success_rate": rate + (0 if suffix else 20)}])
+            )
             (folder / "table.md").write_text(f"{settings}\n\n| planner | ... |\n")
     header, _, *rows = [line for line in report.paired_comparison(tmp_path) if line.startswith("| ")]
     assert header == "| training observations | pile-5 | pile-5, depth noise | measured |"

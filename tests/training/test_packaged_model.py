@@ -83,7 +83,9 @@ def test_the_shards_the_packaged_model_learned_from_can_be_found():
     for data in card["packed_data"]:
         folder = repository / data["folder"]
         manifest = json.loads((folder / "manifest.json").read_text())
-        migrated = {name for record in manifest.get("migration", {}).values() for name in record["grid_shards"]}
+        migrated = {
+            name for record in manifest.get("migration", {}).values() for name in record["grid_shards"]
+        }
         gone = []
         for shard in data["shards"]:
             path = folder / shard["file"]
@@ -92,7 +94,9 @@ def test_the_shards_the_packaged_model_learned_from_can_be_found():
             else:
                 assert shard["file"] in migrated, f"{path} is missing and was not converted to recipes"
                 gone.append(shard)
-        inside_git = subprocess.run(["git", "-C", str(folder), "rev-parse"], capture_output=True).returncode == 0
+        inside_git = (
+            subprocess.run(["git", "-C", str(folder), "rev-parse"], capture_output=True).returncode == 0
+        )
         if gone and inside_git:
             found = grids_from_history(folder, [gone[0]["file"]])
             assert found is not None, "the converted grid shards are not in the repository's history"

@@ -133,7 +133,11 @@ def test_grid_shards_migrate_to_recipes_with_proof(raw: Path, tmp_path: Path):
     git(repo, "init", "-q")
     git(repo, "add", "-A")
     git(repo, "commit", "-q", "-m", "grid shards")
-    stored = {str(s): g for shard in ShardFolder(grids).load() for s, g in zip(shard.scene_ids, shard.grids, strict=True)}
+    stored = {
+        str(s): g
+        for shard in ShardFolder(grids).load()
+        for s, g in zip(shard.scene_ids, shard.grids, strict=True)
+    }
     migrated = vgn_data("migrate", str(grids), "--work", str(tmp_path / "work"), "--objects", "pile=blocks",
                         "--renderer", "tiny", "--finish")  # fmt: skip
     assert migrated.returncode == 0, migrated.stderr
@@ -146,7 +150,9 @@ def test_grid_shards_migrate_to_recipes_with_proof(raw: Path, tmp_path: Path):
     # The removed grids are found in the history, and the rebuilt scenes equal them voxel for voxel.
     verified = vgn_data("verify", str(grids))
     assert verified.returncode == 0, verified.stdout
-    assert f"largest difference from the stored grid 0 / 255 ({len(stored)} scenes compared" in verified.stdout
+    assert (
+        f"largest difference from the stored grid 0 / 255 ({len(stored)} scenes compared" in verified.stdout
+    )
     extracted = vgn_data("legacy-grids", str(grids), "--out", str(tmp_path / "legacy"))
     assert extracted.returncode == 0, extracted.stderr
     (shard,) = ShardFolder(tmp_path / "legacy").load()
