@@ -203,6 +203,24 @@ def is_noisy(folder: Path, row: dict[str, Any]) -> bool:
     return any(json.loads(path.read_text()).get("noise") for path in configs)
 
 
+#: What a run's settings line says about how the scene was seen, and how tables name it.
+CONDITIONS = [("side view", "one side view"), ("depth noise", "depth noise"), ("dex sensor", "depth noise"),
+              ("structured-light sensor", "structured-light sensor"), ("camera pose error", "camera pose error")]  # fmt: skip
+
+
+def scenario_label(folder: Path, row: dict[str, Any]) -> str:
+    """``pile-5``, or with how the scene was seen when that was not six clean views, e.g.
+    ``pile-5, structured-light sensor``: runs under different sensors never share a cell."""
+    settings = clutter_settings(folder)
+    if not settings:
+        return row["scenario"] + (", depth noise" if is_noisy(folder, row) else "")
+    found = []
+    for text, label in CONDITIONS:
+        if text in settings and label not in found:
+            found.append(label)
+    return ", ".join([row["scenario"], *found])
+
+
 def shipped_model_id() -> str | None:
     """The weights id of the packaged model (its card's), which the README's table is about."""
     try:
@@ -224,7 +242,7 @@ def headline_table(results: Path) -> str | None:
                 continue
             if row.get("model") not in (shipped, "antipodal"):
                 continue  # other weights (experiments) have their own pages
-            scenario = row["scenario"] + (", depth noise" if is_noisy(folder, row) else "")
+            scenario = scenario_label(folder, row)
             date = str((row_measured(row, folder) or {}).get("date") or "")
             text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f}"
             if (scenario, row["planner"]) not in cells or date >= cells[scenario, row["planner"]][0]:
@@ -596,7 +614,7 @@ def paired_comparison(results: Path) -> list[str]:
         arm = folder.name.removeprefix("paired-").removesuffix("-noise")
         arms += [arm] if arm not in arms else []
         for row in rows:
-            column = row["scenario"] + (", depth noise" if is_noisy(folder, row) else "")
+            column = scenario_label(folder, row)
             columns += [column] if column not in columns else []
             cells[arm, column] = (
                 f"{pct(row['success_rate'], row.get('success_rate_ci95'))}, {row['rounds']} rounds"

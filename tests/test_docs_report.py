@@ -148,3 +148,21 @@ def test_paired_comparison_rows_per_arm_and_columns_per_setting(tmp_path: Path):
     assert header == "| training observations | pile-5 | pile-5, depth noise | measured |"
     assert rows[0].startswith("| fixed | 45.7 (51.2-61.1), 100 rounds | 25.7 (51.2-61.1), 100 rounds |")
     assert rows[1].startswith("| fresh | 60.0") and "2031-02-03" in rows[1] and len(rows) == 2
+
+
+def test_runs_under_other_sensors_get_their_own_rows(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    clutter_results(tmp_path / "clean", [ROW])
+    clutter_results(tmp_path / "sl", [{**ROW, "success_rate": 41.0}],
+                    settings="seed 1, rounds per scenario 100, six view(s), structured-light sensor, camera pose error")  # fmt: skip
+    clutter_results(
+        tmp_path / "side",
+        [{**ROW, "success_rate": 33.0}],
+        settings="seed 1, rounds per scenario 100, side view(s)",
+    )
+    lines = report.headline_table(tmp_path).splitlines()
+    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in lines
+    assert any(
+        line.startswith("| pile-5, structured-light sensor, camera pose error | 41.0") for line in lines
+    )
+    assert any(line.startswith("| pile-5, one side view | 33.0") for line in lines)
