@@ -105,6 +105,14 @@ class DatasetSummary:
     missing_scene_files: int
     cache: str
 
+    def count(self, labels: LabelSet) -> None:
+        """Count one scene that trains, with its labels."""
+        positives = int(labels.label.sum())
+        self.scenes += 1
+        self.grasps += len(labels)
+        self.positives += positives
+        self.negatives += len(labels) - positives
+
     def as_dict(self) -> dict:
         """The summary as JSON-ready fields for the model card."""
         return asdict(self)
@@ -159,11 +167,7 @@ def load_scenes(
                 continue
             source = GridSource(dataset, scene_id, grids_dir / f"{scene_id}.npz", resolution, max_depth, key)
             scenes.append(Scene(index, scene_id, source, labels, voxel_size))
-            positives = int(labels.label.sum())
-            summary.scenes += 1
-            summary.grasps += len(labels)
-            summary.positives += positives
-            summary.negatives += len(labels) - positives
+            summary.count(labels)
         summaries.append(summary)
     return scenes, summaries
 
@@ -191,11 +195,7 @@ def _load_packed(
                 summary.scenes_without_labels += 1
                 continue
             scenes.append(Scene(index, str(scene_id), PackedGrid(grid), labels, voxel_size))
-            positives = int(labels.label.sum())
-            summary.scenes += 1
-            summary.grasps += len(labels)
-            summary.positives += positives
-            summary.negatives += len(labels) - positives
+            summary.count(labels)
     return scenes, summary
 
 
@@ -235,11 +235,7 @@ def _load_recipes(
                 summary.scenes_without_labels += 1
                 continue
             scenes.append(Scene(index, scene_id, RenderedObservations(grids, row), labels, voxel_size))
-            positives = int(labels.label.sum())
-            summary.scenes += 1
-            summary.grasps += len(labels)
-            summary.positives += positives
-            summary.negatives += len(labels) - positives
+            summary.count(labels)
     return scenes, summary
 
 

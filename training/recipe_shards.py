@@ -36,7 +36,7 @@ import numpy as np
 
 from training.grids import MAX_DEPTH, RESOLUTION
 from training.recipe_grids import DIGEST
-from training.shards import ShardError, sha256_of
+from training.shards import ShardError, checked_shard, sha256_of
 from training.shards import _now as now
 from vgn_data.files import remove_stale_temporaries, write_atomically
 
@@ -194,11 +194,7 @@ class RecipeFolder:
             )
         shards = []
         for entry in manifest["shards"]:
-            path = self.root / entry["file"]
-            if not path.is_file():
-                raise ShardError(f"{path} is listed in {self.manifest_path} but missing")
-            if verify and sha256_of(path) != entry["sha256"]:
-                raise ShardError(f"{path} does not match its sha256 in the manifest: damaged or rewritten")
+            path = checked_shard(self.root, entry, self.manifest_path, verify)
             shards.append(RecipeShard(entry["source"], entry["file"], _read(path)))
         return shards
 

@@ -106,11 +106,7 @@ class ShardFolder:
         manifest = self.manifest()
         shards = []
         for entry in manifest["shards"]:
-            path = self.root / entry["file"]
-            if not path.is_file():
-                raise ShardError(f"{path} is listed in {self.manifest_path} but missing")
-            if verify and sha256_of(path) != entry["sha256"]:
-                raise ShardError(f"{path} does not match its sha256 in the manifest: damaged or rewritten")
+            path = checked_shard(self.root, entry, self.manifest_path, verify)
             with _open_shard(path) as data:
                 shards.append(
                     Shard(
@@ -255,6 +251,17 @@ class ShardFolder:
             "last_scene": scene_ids[-1],
             "created": _now(),
         }
+
+
+def checked_shard(root: Path, entry: dict[str, Any], manifest_path: Path, verify: bool = True) -> Path:
+    """The path of a manifest entry's shard, after checking that it is there and (with ``verify``)
+    that it is the file the manifest names by sha256."""
+    path = root / entry["file"]
+    if not path.is_file():
+        raise ShardError(f"{path} is listed in {manifest_path} but missing")
+    if verify and sha256_of(path) != entry["sha256"]:
+        raise ShardError(f"{path} does not match its sha256 in the manifest: damaged or rewritten")
+    return path
 
 
 def _open_shard(path: Path) -> np.lib.npyio.NpzFile:
