@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from benchmarks.chart import write_chart
+from benchmarks.paper import PAPER_GPD, PAPER_TABLE_1, SCENARIOS
 from benchmarks.report import this_machine
 from client.embedded import EmbeddedService
 from client.http import VGNClient
@@ -40,21 +41,7 @@ from vgn_data.files import write_atomically
 if TYPE_CHECKING:
     from sim_worker.ray_runner import ClutterPool, RoundProgress
 
-#: VGN paper, Table 1, VGN at threshold 0.9 (random selection): (success %, cleared %).
-PAPER_TABLE_1 = {
-    "blocks-5": (87.6, 90.1),
-    "pile-5": (62.3, 46.4),
-    "packed-5": (87.6, 80.4),
-    "pile-10": (59.3, 34.6),
-}
-#: VGN paper, Table 1, the GPD baseline (its best-ranked grasp): (success %, cleared %).
-PAPER_GPD = {
-    "blocks-5": (88.6, 39.4),
-    "pile-5": (59.9, 26.1),
-    "packed-5": (73.7, 72.8),
-    "pile-10": (63.1, 17.0),
-}
-DEFAULT_SCENARIOS = ["blocks-5", "pile-5", "packed-5", "pile-10"]
+DEFAULT_SCENARIOS = SCENARIOS
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
