@@ -160,16 +160,33 @@ def load_scenes(
             if not (dataset.scenes_dir / f"{scene_id}.npz").is_file():
                 summary.missing_scene_files += 1
                 continue
-            labels, outside = LabelSet.from_rows(scene_rows, voxel_size, resolution)
-            summary.outside_grid += outside
-            if not len(labels):
-                summary.scenes_without_labels += 1
+            labels = _admit(summary, scene_rows, voxel_size, resolution)
+            if labels is None:
                 continue
             source = GridSource(dataset, scene_id, grids_dir / f"{scene_id}.npz", resolution, max_depth, key)
             scenes.append(Scene(index, scene_id, source, labels, voxel_size))
-            summary.count(labels)
         summaries.append(summary)
     return scenes, summaries
+
+
+def _check_grid(folder: Path, manifest: dict, resolution: int, max_depth: float) -> None:
+    """Refuse a folder whose data was made for another grid or depth cut-off than this run's."""
+    if manifest["resolution"] != resolution or manifest["max_depth"] != max_depth:
+        raise ValueError(
+            f"{folder} holds data for resolution {manifest['resolution']} and depth cut-off "
+            f"{manifest['max_depth']} m; this run asks for {resolution} and {max_depth} m"
+        )
+
+
+def _admit(summary: DatasetSummary, rows: np.ndarray, voxel_size: float, resolution: int) -> LabelSet | None:
+    """A scene's labels inside the grid, counted in ``summary``; None (counted too) when none are."""
+    labels, outside = LabelSet.from_rows(rows, voxel_size, resolution)
+    summary.outside_grid += outside
+    if not len(labels):
+        summary.scenes_without_labels += 1
+        return None
+    summary.count(labels)
+    return labels
 
 
 def _load_packed(
@@ -178,24 +195,16 @@ def _load_packed(
     """Scenes of a shard folder (every shard's sha256 checked) and its counts."""
     shards = ShardFolder(folder)
     manifest = shards.manifest()
-    if manifest["resolution"] != resolution or manifest["max_depth"] != max_depth:
-        raise ValueError(
-            f"{folder} holds grids of resolution {manifest['resolution']} and depth cut-off "
-            f"{manifest['max_depth']} m; this run asks for {resolution} and {max_depth} m"
-        )
+    _check_grid(folder, manifest, resolution, max_depth)
     size = float(manifest["setup"]["size"])
     voxel_size = size / resolution
     summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, "packed shards")
     scenes: list[Scene] = []
     for shard in shards.load(verify=True):
         for scene_id, grid, rows in zip(shard.scene_ids, shard.grids, shard.rows_by_scene(), strict=True):
-            labels, outside = LabelSet.from_rows(rows, voxel_size, resolution)
-            summary.outside_grid += outside
-            if not len(labels):
-                summary.scenes_without_labels += 1
-                continue
-            scenes.append(Scene(index, str(scene_id), PackedGrid(grid), labels, voxel_size))
-            summary.count(labels)
+            labels = _admit(summary, rows, voxel_size, resolution)
+            if labels is not None:
+                scenes.append(Scene(index, str(scene_id), PackedGrid(grid), labels, voxel_size))
     return scenes, summary
 
 
@@ -212,30 +221,25 @@ def _load_recipes(
     """Scenes of a recipe folder with their rendered observations (rendered now where missing)."""
     recipes = RecipeFolder(folder)
     manifest = recipes.manifest()
-    if manifest["resolution"] != resolution or manifest["max_depth"] != max_depth:
-        raise ValueError(f"{folder} holds recipes for resolution {manifest['resolution']} and depth cut-off "
-                         f"{manifest['max_depth']} m; this run asks for {resolution} and {max_depth} m")  # fmt: skip
+    _check_grid(folder, manifest, resolution, max_depth)
+    shards = recipes.load(verify=True)
     cache = Path(cache_root) if cache_root is not None else default_cache_dir() / "observations"
     bar = tqdm(total=sum(e["scenes"] for e in manifest["shards"]), desc="observations", unit="scene",
                disable=not progress, leave=False)  # fmt: skip
     try:
-        paths = render_cache(folder, cache, settings, max(1, workers), progress=bar.update)
+        paths = render_cache(folder, cache, settings, max(1, workers), progress=bar.update, shards=shards)
     finally:
         bar.close()
     size = float(manifest["setup"]["size"])
     voxel_size = size / resolution
     summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, str(cache))
     scenes: list[Scene] = []
-    for shard, path in zip(recipes.load(verify=True), paths, strict=True):
+    for shard, path in zip(shards, paths, strict=True):
         grids = open_cache(path, len(shard.scene_ids), settings)
         for row, (scene_id, rows) in enumerate(zip(shard.scene_ids, shard.labels_by_scene(), strict=True)):
-            labels, outside = LabelSet.from_rows(rows, voxel_size, resolution)
-            summary.outside_grid += outside
-            if not len(labels):
-                summary.scenes_without_labels += 1
-                continue
-            scenes.append(Scene(index, scene_id, RenderedObservations(grids, row), labels, voxel_size))
-            summary.count(labels)
+            labels = _admit(summary, rows, voxel_size, resolution)
+            if labels is not None:
+                scenes.append(Scene(index, scene_id, RenderedObservations(grids, row), labels, voxel_size))
     return scenes, summary
 
 
