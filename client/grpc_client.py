@@ -154,12 +154,14 @@ class GRPCClient:
         session_id: str | None = None,
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
+        decay: float | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
         request = pb.CreateSessionRequest(
             session_id=session_id,
             workspace=convert.workspace_message(workspace or Workspace()),
             intrinsics=convert.intrinsics_message(intrinsics),
+            decay=decay,
         )
         return self._call(self._stub.CreateSession, request, convert.session_info)
 
@@ -226,6 +228,58 @@ class GRPCClient:
         return StreamResult(
             answer.session_id, answer.frames_received, answer.frame_count, answer.integration_ms
         )
+
+    def track(
+        self,
+        session_id: str,
+        frames: Iterable[tuple[np.ndarray | bytes, Pose | np.ndarray]],
+        plan_every: int = 1,
+        intrinsics: Intrinsics | None = None,
+        depth_scale: float = 1000.0,
+        max_depth: float = 2.0,
+        match_distance: float | None = None,
+        match_angle: float | None = None,
+        **options: Any,
+    ) -> Iterator[GraspResult]:
+        """Closed loop over one ``Track`` stream: each ``(depth, camera_pose)`` of ``frames`` is
+        fused as it is sent and, after every ``plan_every``-th, the current grasps come back,
+        each with a ``track_id`` that stays with the same grasp across re-plans (within
+        ``match_distance`` m and ``match_angle`` degrees). ``options`` are ``GraspQuery`` fields.
+
+        ``frames`` may be a generator that waits for the camera; the stream has no deadline (the
+        client's ``timeout`` does not apply) and ends when ``frames`` does. Close the returned
+        iterator to cancel it early.
+        """
+        query = convert.grasp_query_message(session_id, grasp_query(options))
+        local_errors: list[Exception] = []
+
+        def messages() -> Iterator[pb.TrackRequest]:
+            first = True
+            try:
+                for depth, pose in frames:
+                    frame = frame_message(session_id, depth, pose, intrinsics, depth_scale, max_depth)
+                    if first:
+                        yield pb.TrackRequest(
+                            frame=frame, query=query, plan_every=plan_every,
+                            match_distance=match_distance, match_angle=match_angle,
+                        )  # fmt: skip
+                        first = False
+                    else:
+                        yield pb.TrackRequest(frame=frame)
+            except Exception as error:  # gRPC would report it as a bare CANCELLED
+                local_errors.append(error)
+                raise
+
+        updates = self._stub.Track(messages(), metadata=self._metadata)
+        try:
+            for update in updates:
+                yield convert.grasp_result(update.result)
+        except grpc.RpcError as error:
+            if local_errors:
+                raise local_errors[0] from None
+            raise error_of(error) from None
+        finally:
+            updates.cancel()
 
     # Read-outs ----------------------------------------------------------------------------
     def grasps(self, session_id: str, **options: Any) -> GraspResult:

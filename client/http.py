@@ -217,8 +217,11 @@ class Calls:
         session_id: str | None = None,
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
+        decay: float | None = None,
     ) -> Call[SessionInfo]:
-        spec = SessionCreate(session_id=session_id, workspace=workspace or Workspace(), intrinsics=intrinsics)
+        spec = SessionCreate(
+            session_id=session_id, workspace=workspace or Workspace(), intrinsics=intrinsics, decay=decay
+        )
         return Call("POST", "/sessions", _model(SessionInfo), {"json": spec.model_dump(mode="json")})
 
     @staticmethod
@@ -339,9 +342,11 @@ class VGNClient:
         session_id: str | None = None,
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
+        decay: float | None = None,
     ) -> SessionInfo:
-        """Open a session; the service picks an id when none is given."""
-        return self._run(Calls.create_session(session_id, workspace, intrinsics))
+        """Open a session; the service picks an id when none is given. With ``decay`` (0-1) the
+        session follows a changing scene: each frame first weighs earlier evidence by it."""
+        return self._run(Calls.create_session(session_id, workspace, intrinsics, decay))
 
     def add_frame(
         self,
@@ -449,9 +454,10 @@ class AsyncVGNClient:
         session_id: str | None = None,
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
+        decay: float | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
-        return await self._run(Calls.create_session(session_id, workspace, intrinsics))
+        return await self._run(Calls.create_session(session_id, workspace, intrinsics, decay))
 
     async def add_frame(
         self,

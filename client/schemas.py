@@ -160,6 +160,14 @@ class SessionCreate(_Model):
     intrinsics: Intrinsics | None = Field(
         default=None, description="default intrinsics for this session's frames"
     )
+    decay: float | None = Field(
+        default=None,
+        gt=0.0,
+        lt=1.0,
+        description="follow a changing scene: each frame first weighs what earlier frames fused by "
+        "this factor, and evidence that fades below a twentieth of one frame's is forgotten; "
+        "unset: every frame counts for ever (a static scene)",
+    )
 
 
 class SessionInfo(_Model):
@@ -173,6 +181,7 @@ class SessionInfo(_Model):
     created_at: float = Field(description="unix time")
     last_used_at: float = Field(description="unix time")
     expires_at: float = Field(description="unix time at which an idle session is dropped")
+    decay: float | None = Field(default=None, description="the session's forgetting factor, if it forgets")
 
 
 class SessionList(_Model):
@@ -336,6 +345,10 @@ class Grasp(_Model):
     approach: Vector3 = Field(description="unit approach direction (grasp z axis)")
     width: float = Field(description="opening width, metres")
     quality: float = Field(ge=0.0, le=1.0)
+    track_id: int | None = Field(
+        default=None,
+        description="the same grasp across re-plans of a tracking stream (gRPC Track); null elsewhere",
+    )
 
     def as_matrix(self) -> np.ndarray:
         """The 4×4 grasp frame → world matrix."""

@@ -63,6 +63,7 @@ class Session:
             created_at=self.created_at,
             last_used_at=self.last_used_at,
             expires_at=self.last_used_at + ttl_s,
+            decay=self.volume.decay,
         )
 
 
@@ -103,6 +104,7 @@ class SessionStore:
             self._cloud_resolution,
             self._cloud_max_pending,
             self.cloud_fusion,
+            spec.decay,
         )
         with self._lock:
             self._drop_expired(now)

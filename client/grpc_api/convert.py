@@ -78,7 +78,7 @@ def workspace_dict(message: pb.Workspace) -> dict[str, Any]:
 
 def session_create_dict(message: pb.CreateSessionRequest) -> dict[str, Any]:
     """A ``SessionCreate`` dict of the fields the request sets."""
-    data = optional_fields(message, ("session_id",))
+    data = optional_fields(message, ("session_id", "decay"))
     if message.HasField("workspace"):
         data["workspace"] = workspace_dict(message.workspace)
     if message.HasField("intrinsics"):
@@ -150,6 +150,7 @@ def session_message(info: SessionInfo) -> pb.Session:
         created_at=info.created_at,
         last_used_at=info.last_used_at,
         expires_at=info.expires_at,
+        decay=info.decay,
     )
 
 
@@ -167,6 +168,7 @@ def grasp_result_message(result: GraspResult) -> pb.GraspResult:
             approach=vector3(g.approach),
             width=g.width,
             quality=g.quality,
+            track_id=g.track_id or 0,
         )
         for g in result.grasps
     ]
@@ -219,6 +221,7 @@ def session_info(message: pb.Session) -> SessionInfo:
         created_at=message.created_at,
         last_used_at=message.last_used_at,
         expires_at=message.expires_at,
+        decay=message.decay if message.HasField("decay") else None,
     )
 
 
@@ -245,6 +248,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
             "approach": vector(g.approach),
             "width": g.width,
             "quality": g.quality,
+            "track_id": g.track_id or None,
         }
         for g in message.grasps
     ]

@@ -82,17 +82,19 @@ class Workspace(_message.Message):
     def __init__(self, size: _Optional[float] = ..., resolution: _Optional[int] = ..., pose: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
-    __slots__ = ("session_id", "workspace", "intrinsics")
+    __slots__ = ("session_id", "workspace", "intrinsics", "decay")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     WORKSPACE_FIELD_NUMBER: _ClassVar[int]
     INTRINSICS_FIELD_NUMBER: _ClassVar[int]
+    DECAY_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     workspace: Workspace
     intrinsics: Intrinsics
-    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ...) -> None: ...
+    decay: float
+    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., decay: _Optional[float] = ...) -> None: ...
 
 class Session(_message.Message):
-    __slots__ = ("session_id", "workspace", "intrinsics", "frame_count", "integration_ms", "created_at", "last_used_at", "expires_at")
+    __slots__ = ("session_id", "workspace", "intrinsics", "frame_count", "integration_ms", "created_at", "last_used_at", "expires_at", "decay")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     WORKSPACE_FIELD_NUMBER: _ClassVar[int]
     INTRINSICS_FIELD_NUMBER: _ClassVar[int]
@@ -101,6 +103,7 @@ class Session(_message.Message):
     CREATED_AT_FIELD_NUMBER: _ClassVar[int]
     LAST_USED_AT_FIELD_NUMBER: _ClassVar[int]
     EXPIRES_AT_FIELD_NUMBER: _ClassVar[int]
+    DECAY_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     workspace: Workspace
     intrinsics: Intrinsics
@@ -109,7 +112,8 @@ class Session(_message.Message):
     created_at: float
     last_used_at: float
     expires_at: float
-    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., frame_count: _Optional[int] = ..., integration_ms: _Optional[float] = ..., created_at: _Optional[float] = ..., last_used_at: _Optional[float] = ..., expires_at: _Optional[float] = ...) -> None: ...
+    decay: float
+    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., frame_count: _Optional[int] = ..., integration_ms: _Optional[float] = ..., created_at: _Optional[float] = ..., last_used_at: _Optional[float] = ..., expires_at: _Optional[float] = ..., decay: _Optional[float] = ...) -> None: ...
 
 class GetSessionRequest(_message.Message):
     __slots__ = ("session_id",)
@@ -212,18 +216,20 @@ class GraspQuery(_message.Message):
     def __init__(self, session_id: _Optional[str] = ..., planner: _Optional[_Union[Planner, str]] = ..., threshold: _Optional[float] = ..., max_grasps: _Optional[int] = ..., nms_size: _Optional[int] = ..., crop_min: _Optional[_Union[Vector3, _Mapping]] = ..., crop_max: _Optional[_Union[Vector3, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., max_approach_angle: _Optional[float] = ..., clearance: _Optional[bool] = ..., turn_average: _Optional[bool] = ...) -> None: ...
 
 class Grasp(_message.Message):
-    __slots__ = ("position", "orientation", "approach", "width", "quality")
+    __slots__ = ("position", "orientation", "approach", "width", "quality", "track_id")
     POSITION_FIELD_NUMBER: _ClassVar[int]
     ORIENTATION_FIELD_NUMBER: _ClassVar[int]
     APPROACH_FIELD_NUMBER: _ClassVar[int]
     WIDTH_FIELD_NUMBER: _ClassVar[int]
     QUALITY_FIELD_NUMBER: _ClassVar[int]
+    TRACK_ID_FIELD_NUMBER: _ClassVar[int]
     position: Vector3
     orientation: Quaternion
     approach: Vector3
     width: float
     quality: float
-    def __init__(self, position: _Optional[_Union[Vector3, _Mapping]] = ..., orientation: _Optional[_Union[Quaternion, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., width: _Optional[float] = ..., quality: _Optional[float] = ...) -> None: ...
+    track_id: int
+    def __init__(self, position: _Optional[_Union[Vector3, _Mapping]] = ..., orientation: _Optional[_Union[Quaternion, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., width: _Optional[float] = ..., quality: _Optional[float] = ..., track_id: _Optional[int] = ...) -> None: ...
 
 class GraspResult(_message.Message):
     __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average")
@@ -309,3 +315,27 @@ class ModelInfo(_message.Message):
     card_json: str
     runtime_json: str
     def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ...) -> None: ...
+
+class TrackRequest(_message.Message):
+    __slots__ = ("frame", "query", "plan_every", "match_distance", "match_angle")
+    FRAME_FIELD_NUMBER: _ClassVar[int]
+    QUERY_FIELD_NUMBER: _ClassVar[int]
+    PLAN_EVERY_FIELD_NUMBER: _ClassVar[int]
+    MATCH_DISTANCE_FIELD_NUMBER: _ClassVar[int]
+    MATCH_ANGLE_FIELD_NUMBER: _ClassVar[int]
+    frame: Frame
+    query: GraspQuery
+    plan_every: int
+    match_distance: float
+    match_angle: float
+    def __init__(self, frame: _Optional[_Union[Frame, _Mapping]] = ..., query: _Optional[_Union[GraspQuery, _Mapping]] = ..., plan_every: _Optional[int] = ..., match_distance: _Optional[float] = ..., match_angle: _Optional[float] = ...) -> None: ...
+
+class TrackUpdate(_message.Message):
+    __slots__ = ("result", "frames_received", "cycle_ms")
+    RESULT_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_RECEIVED_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_MS_FIELD_NUMBER: _ClassVar[int]
+    result: GraspResult
+    frames_received: int
+    cycle_ms: float
+    def __init__(self, result: _Optional[_Union[GraspResult, _Mapping]] = ..., frames_received: _Optional[int] = ..., cycle_ms: _Optional[float] = ...) -> None: ...

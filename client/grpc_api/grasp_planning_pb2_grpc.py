@@ -89,6 +89,11 @@ class GraspPlanningStub:
                 request_serializer=vgn_dot_v1_dot_grasp__planning__pb2.GetModelInfoRequest.SerializeToString,
                 response_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.ModelInfo.FromString,
                 _registered_method=True)
+        self.Track = channel.stream_stream(
+                '/vgn.v1.GraspPlanning/Track',
+                request_serializer=vgn_dot_v1_dot_grasp__planning__pb2.TrackRequest.SerializeToString,
+                response_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.TrackUpdate.FromString,
+                _registered_method=True)
 
 
 class GraspPlanningServicer:
@@ -168,6 +173,15 @@ class GraspPlanningServicer:
         context.set_details('Method not implemented!')
         raise NotImplementedError('Method not implemented!')
 
+    def Track(self, request_iterator, context):
+        """Closed-loop planning: fuse each frame as it arrives and, after every `plan_every`-th one,
+        send the current ranked grasps, each with a `track_id` that stays with the same grasp
+        across re-plans. One stream follows one session; a rejected frame ends it with its error.
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
 
 def add_GraspPlanningServicer_to_server(servicer, server):
     rpc_method_handlers = {
@@ -225,6 +239,11 @@ def add_GraspPlanningServicer_to_server(servicer, server):
                     servicer.GetModelInfo,
                     request_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.GetModelInfoRequest.FromString,
                     response_serializer=vgn_dot_v1_dot_grasp__planning__pb2.ModelInfo.SerializeToString,
+            ),
+            'Track': grpc.stream_stream_rpc_method_handler(
+                    servicer.Track,
+                    request_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.TrackRequest.FromString,
+                    response_serializer=vgn_dot_v1_dot_grasp__planning__pb2.TrackUpdate.SerializeToString,
             ),
     }
     generic_handler = grpc.method_handlers_generic_handler(
@@ -524,6 +543,33 @@ class GraspPlanning:
             '/vgn.v1.GraspPlanning/GetModelInfo',
             vgn_dot_v1_dot_grasp__planning__pb2.GetModelInfoRequest.SerializeToString,
             vgn_dot_v1_dot_grasp__planning__pb2.ModelInfo.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def Track(request_iterator,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.stream_stream(
+            request_iterator,
+            target,
+            '/vgn.v1.GraspPlanning/Track',
+            vgn_dot_v1_dot_grasp__planning__pb2.TrackRequest.SerializeToString,
+            vgn_dot_v1_dot_grasp__planning__pb2.TrackUpdate.FromString,
             options,
             channel_credentials,
             insecure,

@@ -105,6 +105,26 @@ def refusal(settings: Settings, context: grpc.ServicerContext) -> Failure | None
     return None
 
 
+def failure_of(error: Exception, route: str) -> Failure:
+    """The status a servicer's exception ends its call with (a bug is logged and INTERNAL)."""
+    if isinstance(error, ServiceError):
+        kind = next((k for k in CODE_OF if isinstance(error, k)), InvalidInput)
+        return CODE_OF[kind], str(error), HTTP_STATUS_OF.get(kind, 400)
+    if isinstance(error, ValidationError):
+        return grpc.StatusCode.INVALID_ARGUMENT, validation_message(error), 422
+    if isinstance(error, CheckpointError):
+        return grpc.StatusCode.UNAVAILABLE, str(error), 503
+    log.exception("unhandled error in %s", route, exc_info=error)  # as the HTTP app's 500 does
+    return grpc.StatusCode.INTERNAL, f"internal error: {type(error).__name__}", 500
+
+
+def _count(servicer: Servicer, route: str, failure: Failure | None, started: float) -> None:
+    if servicer.metrics is not None:
+        code = failure[0] if failure else grpc.StatusCode.OK
+        servicer.metrics.requests.labels("GRPC", route, code.name).inc()
+        servicer.metrics.latency.labels("GRPC", route).observe(time.perf_counter() - started)
+
+
 def rpc(method: F) -> F:
     """Run a servicer method with the API key checked, the client's deadline respected and
     every error turned into a status code; counted in the app's request metrics (method
@@ -120,22 +140,32 @@ def rpc(method: F) -> F:
         if failure is None:
             try:
                 result = method(self, request, context)
-            except ServiceError as error:
-                kind = next((k for k in CODE_OF if isinstance(error, k)), InvalidInput)
-                failure = CODE_OF[kind], str(error), HTTP_STATUS_OF.get(kind, 400)
-            except ValidationError as error:
-                failure = grpc.StatusCode.INVALID_ARGUMENT, validation_message(error), 422
-            except CheckpointError as error:
-                failure = grpc.StatusCode.UNAVAILABLE, str(error), 503
-            except Exception as error:  # a bug: say so, as the HTTP app's 500 does
-                log.exception("unhandled error in %s", route)
-                failure = grpc.StatusCode.INTERNAL, f"internal error: {type(error).__name__}", 500
-        if self.metrics is not None:
-            code = failure[0] if failure else grpc.StatusCode.OK
-            self.metrics.requests.labels("GRPC", route, code.name).inc()
-            self.metrics.latency.labels("GRPC", route).observe(time.perf_counter() - started)
+            except Exception as error:
+                failure = failure_of(error, route)
+        _count(self, route, failure, started)
         if failure is not None:
             abort(context, *failure)
         return result
+
+    return wrapper  # type: ignore[return-value]
+
+
+def streaming_rpc(method: F) -> F:
+    """``rpc`` for a method that yields its replies (server streaming): the replies sent before
+    an error stay sent, and the error ends the stream with its status code."""
+    route = f"/{SERVICE_NAME}/{method.__name__}"
+
+    @functools.wraps(method)
+    def wrapper(self: Servicer, request: Any, context: grpc.ServicerContext) -> Any:
+        started = time.perf_counter()
+        failure = refusal(self.settings, context)
+        if failure is None:
+            try:
+                yield from method(self, request, context)
+            except Exception as error:
+                failure = failure_of(error, route)
+        _count(self, route, failure, started)
+        if failure is not None:
+            abort(context, *failure)
 
     return wrapper  # type: ignore[return-value]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 
 import grpc
 from pydantic import ValidationError
@@ -11,11 +13,46 @@ from client.grpc_api import convert
 from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningServicer
 from client.schemas import FrameMeta, FrameResult, GraspQuery, SessionCreate
+from client.tracking import DEFAULT_MAX_ANGLE_DEG, DEFAULT_MAX_DISTANCE, GraspTracker
 from service.api.metrics import ServiceMetrics
 from service.core import PlanningService
 from service.errors import InvalidInput, ServiceError, UnsupportedMediaType
-from service.grpc.errors import PayloadTooLarge, rpc, validation_message
+from service.grpc.errors import PayloadTooLarge, rpc, streaming_rpc, validation_message
 from service.grpc.handlers import MalformedRequest
+
+
+def check_one_session(index: int, session_id: str, named: str) -> None:
+    """One stream carries one session's frames: a frame naming another is refused."""
+    if named and session_id and named != session_id:
+        raise InvalidInput(
+            f"frame {index}: the stream is for session {session_id!r}, this frame names "
+            f"{named!r}; one stream carries one session's frames"
+        )
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """What the first message of a ``Track`` stream sets for the whole stream."""
+
+    query: GraspQuery
+    plan_every: int
+    tracker: GraspTracker
+
+    @classmethod
+    def of(cls, first: pb.TrackRequest) -> TrackOptions:
+        """The options of ``first``, checked (``InvalidInput`` names the one out of range)."""
+        query = GraspQuery.model_validate(convert.grasp_query_dict(first.query))
+        plan_every = first.plan_every if first.HasField("plan_every") else 1
+        distance = first.match_distance if first.HasField("match_distance") else DEFAULT_MAX_DISTANCE
+        angle = first.match_angle if first.HasField("match_angle") else DEFAULT_MAX_ANGLE_DEG
+        if not 1 <= plan_every <= 1000:
+            raise InvalidInput(f"plan_every is {plan_every}; plan after every 1 to 1000 frames")
+        if not (0 < distance <= 1.0 and 0 < angle <= 180):
+            raise InvalidInput(
+                f"match_distance {distance:g} m and match_angle {angle:g} degrees: "
+                "use 0 < match_distance <= 1 and 0 < match_angle <= 180"
+            )
+        return cls(query, plan_every, GraspTracker(distance, angle))
 
 
 class GraspPlanning(GraspPlanningServicer):
@@ -75,18 +112,9 @@ class GraspPlanning(GraspPlanningServicer):
                 break
             if isinstance(frame, MalformedRequest):
                 raise InvalidInput(f"frame {index}: {frame.describe()}")
-            if frame.session_id and session_id and frame.session_id != session_id:
-                raise InvalidInput(
-                    f"frame {index}: the stream is for session {session_id!r}, this frame names "
-                    f"{frame.session_id!r}; one stream carries one session's frames"
-                )
+            check_one_session(index, session_id, frame.session_id)
             session_id = session_id or frame.session_id
-            try:
-                result = self._fuse(session_id, frame)
-            except ValidationError as error:
-                raise InvalidInput(f"frame {index}: {validation_message(error)}") from None
-            except ServiceError as error:
-                raise type(error)(f"frame {index}: {error}") from None
+            result = self._fuse_streamed(index, session_id, frame)
             received += 1
             integration_ms += result.integration_ms
         return pb.StreamFramesResult(
@@ -95,6 +123,39 @@ class GraspPlanning(GraspPlanningServicer):
             frame_count=result.frame_count if result else 0,
             integration_ms=round(integration_ms, 3),
         )
+
+    @streaming_rpc
+    def Track(
+        self, request_iterator: Iterator[pb.TrackRequest], context: grpc.ServicerContext
+    ) -> Iterator[pb.TrackUpdate]:
+        """Closed loop: fuse each frame as ``StreamFrames`` does and, after every ``plan_every``-th,
+        plan as ``GetGrasps`` does and send the grasps numbered by a ``GraspTracker``."""
+        session_id, received, options = "", 0, None
+        for index, message in enumerate(request_iterator):
+            if not context.is_active():
+                break
+            if isinstance(message, MalformedRequest):
+                raise InvalidInput(f"message {index}: {message.describe()}")
+            if options is None:
+                options = TrackOptions.of(message)
+                session_id = message.frame.session_id or message.query.session_id
+            check_one_session(index, session_id, message.frame.session_id)
+            if not message.HasField("frame"):
+                raise InvalidInput(f"message {index}: a Track message carries a frame")
+            started = time.perf_counter()
+            self._fuse_streamed(index, session_id, message.frame)
+            received += 1
+            if received % options.plan_every:
+                continue
+            result = self.core.plan(session_id, options.query)
+            result = result.model_copy(update={"grasps": options.tracker.update(result.grasps)})
+            if self.metrics is not None:
+                self.metrics.planning.observe(result.planning_ms / 1e3)
+                self.metrics.grasps.inc(len(result.grasps))
+            cycle_ms = round((time.perf_counter() - started) * 1e3, 3)
+            yield pb.TrackUpdate(
+                result=convert.grasp_result_message(result), frames_received=received, cycle_ms=cycle_ms
+            )
 
     @rpc
     def GetGrasps(self, request: pb.GraspQuery, context: grpc.ServicerContext) -> pb.GraspResult:
@@ -122,6 +183,15 @@ class GraspPlanning(GraspPlanningServicer):
     def GetModelInfo(self, request: pb.GetModelInfoRequest, context: grpc.ServicerContext) -> pb.ModelInfo:
         """``GET /model``; card and runtime as JSON text."""
         return convert.model_info_message(self.core.model_info())
+
+    def _fuse_streamed(self, index: int, session_id: str, frame: pb.Frame) -> FrameResult:
+        """``_fuse`` for the ``index``-th frame of a stream: its errors name the frame."""
+        try:
+            return self._fuse(session_id, frame)
+        except ValidationError as error:
+            raise InvalidInput(f"frame {index}: {validation_message(error)}") from None
+        except ServiceError as error:
+            raise type(error)(f"frame {index}: {error}") from None
 
     def _fuse(self, session_id: str, frame: pb.Frame) -> FrameResult:
         """One frame through the same checks as an HTTP upload, in the same order."""

@@ -145,7 +145,11 @@ FRAMES = message(
 )
 REQUESTS: dict[str, st.SearchStrategy] = {
     "CreateSession": message(
-        pb.CreateSessionRequest, session_id=SESSION_IDS, workspace=WORKSPACES, intrinsics=INTRINSICS
+        pb.CreateSessionRequest,
+        session_id=SESSION_IDS,
+        workspace=WORKSPACES,
+        intrinsics=INTRINSICS,
+        decay=DOUBLES,
     ),
     "GetSession": message(pb.GetSessionRequest, session_id=SESSION_IDS),
     "ListSessions": st.just(pb.ListSessionsRequest()),
@@ -168,7 +172,17 @@ REQUESTS: dict[str, st.SearchStrategy] = {
     "GetCloud": message(pb.GetCloudRequest, session_id=SESSION_IDS),
     "GetModelInfo": st.just(pb.GetModelInfoRequest()),
 }
-METHODS = sorted(REQUESTS) + ["StreamFrames"]
+TRACK_MESSAGES = message(
+    pb.TrackRequest,
+    frame=FRAMES,
+    query=REQUESTS["GetGrasps"],
+    plan_every=INT32,
+    match_distance=DOUBLES,
+    match_angle=DOUBLES,
+)
+#: The client-streaming methods: a list of messages each, drained whether they answer once or often.
+STREAMS = {"StreamFrames": FRAMES, "Track": TRACK_MESSAGES}
+METHODS = sorted(REQUESTS) + sorted(STREAMS)
 
 
 def test_every_rpc_is_fuzzed():
@@ -185,11 +199,16 @@ def fuzz_unary(rpc: Channel, method: str, examples: int) -> None:
     check()
 
 
-def fuzz_stream(rpc: Channel, examples: int) -> None:
+def drained(answer: Any) -> Any:
+    """A unary answer as it is; every message of a streamed answer (errors surface here)."""
+    return answer if not hasattr(answer, "__next__") else list(answer)
+
+
+def fuzz_stream(rpc: Channel, method: str, examples: int) -> None:
     @settings(max_examples=examples, **FUZZ_SETTINGS)
-    @given(frames=st.lists(FRAMES, max_size=3))
-    def check(frames: list[pb.Frame]) -> None:
-        assert_within_contract(lambda: rpc.stub.StreamFrames(iter(frames), timeout=10))
+    @given(messages=st.lists(STREAMS[method], max_size=3))
+    def check(messages: list[Any]) -> None:
+        assert_within_contract(lambda: drained(getattr(rpc.stub, method)(iter(messages), timeout=10)))
 
     check()
 
@@ -200,9 +219,10 @@ def fuzz_bytes(rpc: Channel, method: str, examples: int) -> None:
     @settings(max_examples=examples, **FUZZ_SETTINGS)
     @given(data=st.binary(max_size=512))
     def check(data: bytes) -> None:
-        if method == "StreamFrames":
-            call = rpc.channel.stream_unary(f"/vgn.v1.GraspPlanning/{method}")
-            assert_within_contract(lambda: call(iter([data]), timeout=10))
+        if method in STREAMS:
+            streaming = rpc.channel.stream_stream if method == "Track" else rpc.channel.stream_unary
+            call = streaming(f"/vgn.v1.GraspPlanning/{method}")
+            assert_within_contract(lambda: drained(call(iter([data]), timeout=10)))
         else:
             assert_within_contract(lambda: rpc.raw(method)(data, timeout=10))
 
@@ -214,8 +234,9 @@ def test_malformed_messages_get_contract_statuses(rpc: Channel, method: str) -> 
     fuzz_unary(rpc, method, SHORT_EXAMPLES)
 
 
-def test_malformed_frame_streams_get_contract_statuses(rpc: Channel) -> None:
-    fuzz_stream(rpc, SHORT_EXAMPLES)
+@pytest.mark.parametrize("method", sorted(STREAMS))
+def test_malformed_streams_get_contract_statuses(rpc: Channel, method: str) -> None:
+    fuzz_stream(rpc, method, SHORT_EXAMPLES)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -226,8 +247,8 @@ def test_garbage_request_bytes_get_contract_statuses(rpc: Channel, method: str) 
 @pytest.mark.slow
 @pytest.mark.parametrize("method", METHODS)
 def test_malformed_messages_long(rpc: Channel, method: str) -> None:
-    if method == "StreamFrames":
-        fuzz_stream(rpc, SLOW_EXAMPLES)
+    if method in STREAMS:
+        fuzz_stream(rpc, method, SLOW_EXAMPLES)
     else:
         fuzz_unary(rpc, method, SLOW_EXAMPLES)
     fuzz_bytes(rpc, method, SLOW_EXAMPLES)
