@@ -219,6 +219,15 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
                        help="report each view's camera pose with a random error (5 mm, 1 degree), as a real arm would")  # fmt: skip
     clear.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn",
                        help="the VGN network, or the service's geometric antipodal baseline (no model needed)")  # fmt: skip
+    clear.add_argument("--disturb", type=float, default=0.0, metavar="P",
+                       help="with probability P per attempt, push the aimed-at object a few cm (or drop it onto the "
+                       "pile) during the approach, after the plan (default 0); see docs/closed-loop.md")  # fmt: skip
+    clear.add_argument("--closed-loop", action="store_true",
+                       help="keep looking while approaching (fixed cameras at 10 Hz, the hand filtered out, a session "
+                       "that forgets), re-plan, and re-target or give up when the aimed-at grasp is gone")  # fmt: skip
+    clear.add_argument("--scan", choices=["fixed", "wrist"], default="fixed",
+                       help="look with the fixed --views, or with a wrist camera moving toward the scene, planning "
+                       "after every frame and stopping once the best grasp is stable (default %(default)s)")  # fmt: skip
     _add_switches(clear, " (what was used is recorded in config.json)")
     clear.add_argument(
         "--results",

@@ -164,8 +164,8 @@ class SessionCreate(_Model):
         default=None,
         gt=0.0,
         lt=1.0,
-        description="follow a changing scene: each frame first weighs what earlier frames fused by "
-        "this factor, and evidence that fades below a twentieth of one frame's is forgotten; "
+        description="follow a changing scene: each frame first weighs the evidence of earlier frames "
+        "in the voxels it sees again by this factor (what it does not see keeps its evidence); "
         "unset: every frame counts for ever (a static scene)",
     )
 

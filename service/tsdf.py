@@ -18,9 +18,6 @@ from service.cloud_fusion import CloudFusion, shared_fusion
 TRUNCATION_VOXELS = 4
 #: Open3D's voxel read-out drops voxels with |tsdf| at or beyond this; VGN trained on that.
 OBSERVED_TSDF_LIMIT = 0.98
-#: In a forgetting session, a voxel whose decayed weight falls below this (a twentieth of one
-#: frame's evidence) becomes unobserved again: what the scene no longer shows is dropped.
-FORGOTTEN_WEIGHT = 0.05
 
 
 def _pinhole(intrinsics: Intrinsics) -> o3d.camera.PinholeCameraIntrinsic:
@@ -66,6 +63,8 @@ class TSDFVolume:
             color_type=o3d.pipelines.integration.TSDFVolumeColorType.NoColor,
         )
         self._buffer: _FrameBuffer | None = None  # one, for the last frame size seen
+        self._scratch: TSDFVolume | None = None  # what one frame alone fuses (integrate_forgetting)
+        self._empty: o3d.utility.Vector2dVector | None = None  # zeros, to empty the scratch volume
 
     def integrate(
         self, depth: np.ndarray, intrinsics: Intrinsics, camera_in_workspace: np.ndarray, max_depth: float
@@ -77,17 +76,31 @@ class TSDFVolume:
             self._buffer = _FrameBuffer(*depth.shape)
         self._volume.integrate(self._buffer.fill(depth, max_depth), _pinhole(intrinsics), extrinsic)
 
-    def decay(self, factor: float) -> None:
-        """Weigh everything fused so far by ``factor`` (< 1), so the next frame counts more.
+    def integrate_forgetting(
+        self, depth: np.ndarray, intrinsics: Intrinsics, camera_in_workspace: np.ndarray, max_depth: float,
+        decay: float,
+    ) -> None:  # fmt: skip
+        """``integrate``, with what this frame sees again weighed by ``decay`` first.
 
-        Open3D averages a voxel's TSDF over its frames with their weights; scaling the weights
-        before a frame makes the volume a moving average that follows a changing scene, and a
-        voxel left with under ``FORGOTTEN_WEIGHT`` is reset to unobserved. It costs a read-out
-        and a write-back of the (N³, 2) array: about 0.5 ms for 40³.
+        Open3D averages each voxel's TSDF over its frames by weight. Scaling the old weight of
+        every voxel the frame updates turns that into a moving average which follows a changing
+        scene, while what the frame does not see (out of view, or hidden behind the robot's own
+        hand) keeps its evidence. The frame is fused into a scratch volume to learn which voxels
+        it updates and what it says there, and the two are combined: about 2 ms for 40³.
         """
+        if self._scratch is None:
+            self._scratch = TSDFVolume(self.size, self.resolution)
+            self._empty = o3d.utility.Vector2dVector(np.zeros((self.resolution**3, 2)))
+        scratch = self._scratch
+        scratch._volume.inject_volume_tsdf(self._empty)  # Open3D's reset() keeps the voxels
+        scratch.integrate(depth, intrinsics, camera_in_workspace, max_depth)
+        new = np.asarray(scratch._volume.extract_volume_tsdf())
         values = np.asarray(self._volume.extract_volume_tsdf())
-        values[:, 1] *= factor
-        values[values[:, 1] < FORGOTTEN_WEIGHT] = 0.0
+        seen = new[:, 1] > 0
+        old_weight = values[seen, 1] * decay
+        weight = old_weight + new[seen, 1]
+        values[seen, 0] = (values[seen, 0] * old_weight + new[seen, 0] * new[seen, 1]) / weight
+        values[seen, 1] = weight
         self._volume.inject_volume_tsdf(o3d.utility.Vector2dVector(values))
 
     def grid(self) -> np.ndarray:
@@ -129,7 +142,7 @@ class QueuedFrame:
     intrinsics: Intrinsics
     camera_in_workspace: np.ndarray
     max_depth: float
-    decay: float | None = None  # the session's forgetting factor, applied before this frame
+    decay: float | None = None  # the session's forgetting (TSDFVolume.integrate_forgetting)
 
     @property
     def nbytes(self) -> int:
@@ -175,7 +188,8 @@ class SceneVolume:
                  max_pending: int = 512, fusion: CloudFusion | None = None,
                  decay: float | None = None) -> None:  # fmt: skip
         self.max_pending = max_pending
-        #: Forgetting: each frame first weighs earlier evidence by this (``TSDFVolume.decay``).
+        #: Forgetting: each frame first weighs the evidence it sees again by this
+        #: (``TSDFVolume.integrate_forgetting``).
         self.decay = decay
         self.workspace_pose = np.asarray(workspace_pose, dtype=np.float64)
         self._world_to_workspace = invert(self.workspace_pose)
@@ -219,9 +233,10 @@ class SceneVolume:
         camera_in_workspace = self._world_to_workspace @ camera_pose
         # Everything that could fail runs before the first volume changes.
         frame = QueuedFrame(compact_depth(depth), intrinsics, camera_in_workspace, max_depth, self.decay)
-        if self.decay is not None:
-            self.coarse.decay(self.decay)
-        self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
+        if self.decay is None:
+            self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
+        else:
+            self.coarse.integrate_forgetting(depth, intrinsics, camera_in_workspace, max_depth, self.decay)
         while True:
             with self._lock:
                 if self._closed or self._fusion.closed:  # the session or the service is gone
@@ -295,9 +310,11 @@ class SceneVolume:
                 self._fine = TSDFVolume(self._size, self._cloud_resolution)
             fine = self._fine
         try:
-            if frame.decay is not None:  # in upload order, as the coarse volume forgot
-                fine.decay(frame.decay)
-            fine.integrate(frame.depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
+            if frame.decay is None:
+                fine.integrate(frame.depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
+            else:  # in upload order, as the coarse volume forgot
+                fine.integrate_forgetting(frame.depth, frame.intrinsics, frame.camera_in_workspace,
+                                          frame.max_depth, frame.decay)  # fmt: skip
         finally:  # a frame Open3D refuses is dropped rather than retried forever
             with self._lock:
                 if self._fine is fine and self._pending and self._pending[0] is frame:  # else reset

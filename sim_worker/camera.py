@@ -18,6 +18,7 @@ the vertical, ``azimuth`` about world z from +x.
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -192,9 +193,15 @@ class Camera:
         """The PyBullet renderer used: EGL's OpenGL when loaded, else TinyRenderer."""
         return pybullet.ER_BULLET_HARDWARE_OPENGL if self.world.egl else pybullet.ER_TINY_RENDERER
 
-    def render_depth(self, camera_pose: np.ndarray) -> np.ndarray:
+    def render_depth(self, camera_pose: np.ndarray, hide: Collection[int] = ()) -> np.ndarray:
         """(H, W) float32 depth in metres (z in the camera frame, 0 = no geometry) seen from
-        ``camera_pose`` (camera → world, OpenCV optical frame), with ``noise`` if set."""
+        ``camera_pose`` (camera → world, OpenCV optical frame), with ``noise`` if set.
+
+        Pixels that see a body of ``hide`` read nothing (0): a robot filters its own hand out of
+        its camera's depth, and what the hand covers stays unseen."""
+        if hide:
+            depth, body = self.render(camera_pose)
+            return np.where(np.isin(body, list(hide)), 0.0, depth).astype(np.float32)
         _, z_buffer, _ = self._capture(camera_pose, pybullet.ER_NO_SEGMENTATION_MASK)
         return self._depth(z_buffer)
 

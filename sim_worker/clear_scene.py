@@ -71,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
         renderer=args.renderer,
         clearance=getattr(args, "clearance", None),
         turn_average=getattr(args, "turn_average", None),
+        disturb=getattr(args, "disturb", 0.0),
+        closed_loop=getattr(args, "closed_loop", False),
+        scan=getattr(args, "scan", "fixed"),
     )
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
     results_dir.mkdir(parents=True, exist_ok=True)

@@ -16,10 +16,17 @@ from typing import Literal
 import numpy as np
 
 from client.http import VGNClient
-from client.schemas import Grasp
+from client.schemas import Grasp, GraspResult
 from sim_worker import images
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, side_view, six_views
-from sim_worker.grasping import GraspTrial, execute_grasp
+from sim_worker.closed_loop import (
+    ApproachWatch,
+    elapsed_ms,
+    wrist_arc,
+    wrist_scan,
+)
+from sim_worker.disturbance import Disturbance, Disturber
+from sim_worker.grasping import GraspTrial, Outcome, execute_grasp
 from sim_worker.gripper import Gripper
 from sim_worker.metrics import summarize
 from sim_worker.objects import object_set
@@ -31,11 +38,15 @@ from sim_worker.settings_checks import check_at_least, check_choice, check_fract
 from sim_worker.world import Renderer, World
 
 MAX_CONSECUTIVE_FAILURES = 2
+#: A closed loop that withdrew this many times in a row ends the round (the scene keeps changing).
+MAX_STOPS_IN_A_ROW = 4
 
 ClutterScene = Literal["blocks", "pile", "packed"]
 #: Depth-sensor models (docs/sensors.md): Dex-Net's noise, or a structured-light camera's errors.
 Sensor = Literal["dex", "structured-light"]
 Views = Literal["six", "side"]
+#: How a round looks before each grasp: the fixed views, or a wrist camera's arc (closed_loop.py).
+Scan = Literal["fixed", "wrist"]
 Selection = Literal["best", "random"]
 Planner = Literal["vgn", "antipodal"]
 
@@ -64,6 +75,12 @@ class ClutterConfig:
     # A depth sensor's errors on every view (``noise`` is "dex"), and per-view camera pose error.
     sensor: Sensor | None = None
     pose_error: bool = False
+    # Closing the loop (closed_loop.py, disturbance.py): the share of attempts in which the aimed-at
+    # object is displaced during the approach; watching and re-planning while approaching; and
+    # how the scene is looked at before each grasp.
+    disturb: float = 0.0
+    closed_loop: bool = False
+    scan: Scan = "fixed"
 
     def __post_init__(self) -> None:
         for name, allowed in (
@@ -72,6 +89,7 @@ class ClutterConfig:
             ("selection", Selection),
             ("planner", Planner),
             ("renderer", Renderer),
+            ("scan", Scan),
         ):
             check_choice(name, getattr(self, name), allowed)
         if self.sensor is not None:
@@ -79,18 +97,24 @@ class ClutterConfig:
         check_at_least("object_count", self.object_count, 1)
         check_at_least("rounds", self.rounds, 1)
         check_fraction("threshold", self.threshold, optional=True)
+        check_fraction("disturb", self.disturb)
+        if self.scan == "wrist" and self.views != "six":
+            raise ValueError("--scan wrist replaces the fixed views: leave --views at its default")
 
     def as_json(self) -> dict:
         """The settings as stored in the results folder's config.json, which a resume must match.
 
-        ``clearance``, ``turn_average``, ``sensor`` and ``pose_error`` are recorded when on; left
-        out when off, so folders of runs from before these options still resume. Resolve the
+        ``clearance``, ``turn_average``, ``sensor``, ``pose_error``, ``disturb`` and
+        ``closed_loop`` are recorded when on (``scan`` when not "fixed"); left out when off, so
+        folders of runs from before these options still resume. Resolve the
         first two first (``resolve_planner``): unresolved, the service's default is recorded as
         off whatever it is."""
         settings = asdict(self)
-        for switch in ("clearance", "turn_average", "sensor", "pose_error"):
+        for switch in ("clearance", "turn_average", "sensor", "pose_error", "disturb", "closed_loop"):
             if not settings[switch]:
                 del settings[switch]
+        if settings["scan"] == "fixed":
+            del settings["scan"]
         return settings
 
     def depth_noise(self) -> DepthNoise | StructuredLightNoise | None:
@@ -158,32 +182,34 @@ class ClutterRemoval:
         self.gripper = Gripper(self.world)
         generate_scene(self.world, self.config.scene, self.objects, self.config.object_count, rng)
         record = RoundRecord(round_id, f"{self.config.seed}-{round_id}", len(self.world.objects))
-        failures = 0
+        # Disturbances draw from a stream of their own, so open and closed loop meet the same ones.
+        disturber = Disturber(self.config.disturb, np.random.default_rng([self.config.seed, round_id, 7]))
+        failures = aborts = 0
         while self.world.objects and failures < MAX_CONSECUTIVE_FAILURES:
-            integration_ms = self._observe()
-            client_started = time.perf_counter()
-            answer = self.vgn.grasps(
-                self.session_id,
-                threshold=self.config.threshold,
-                planner=self.config.planner,
-                clearance=self.config.clearance,
-                turn_average=self.config.turn_average,
-            )
-            client_ms = (time.perf_counter() - client_started) * 1e3
-            if not answer.grasps:
+            observed = self._look(rng)
+            if not observed.answer.grasps:
                 break
-            grasp = self._select(answer.grasps, rng)
+            grasp = self._select(observed.answer.grasps, rng)
             if self.image_dir is not None:
                 self._save_image(record, grasp)
-            trial = execute_grasp(self.world, self.gripper, grasp.as_matrix(), allow_contact=True)
-            record.attempts += 1
-            record.successes += trial.label
-            failures = 0 if trial.label else failures + 1
-            row = _grasp_row(
-                record, grasp, trial, integration_ms, answer.planning_ms, client_ms, len(answer.grasps)
-            )
+            trial, disturbance, watch = self._attempt(grasp, disturber)
+            row = _grasp_row(record, grasp, trial, observed)
             row["contact"] = "+".join(self._body_name(body) for body in trial.contact_bodies)
+            row["disturbance"] = disturbance.kind if disturbance else ""
+            if watch is not None:
+                stopped = trial.outcome is Outcome.INTERRUPTED
+                row["loop"] = "stopped" if stopped else "retried" if aborts else "kept"
+                row["looks"] = watch.looks
             record.grasps.append(row)
+            if trial.outcome is Outcome.INTERRUPTED:  # the closed loop withdrew: no attempt, look again
+                aborts += 1
+                if aborts >= MAX_STOPS_IN_A_ROW:
+                    break
+            else:
+                aborts = 0
+                record.attempts += 1
+                record.successes += trial.label
+                failures = 0 if trial.label else failures + 1
             self.world.wait_for_rest()
             self.world.remove_objects_outside()
         record.cleared = record.successes
@@ -192,15 +218,62 @@ class ClutterRemoval:
             images.write_contact_sheet(self.image_dir, record)
         return record
 
+    def _look(self, rng: np.random.Generator) -> Observed:
+        """Observe the scene afresh and plan: the fixed views, or a wrist scan that stops early."""
+        started = time.perf_counter()
+        self.session_id = fresh_session(self.vgn, self.session_id)
+        if self.config.scan == "wrist":
+            arc = wrist_arc(float(rng.uniform(0.0, 2.0 * np.pi)))
+            scan = wrist_scan(self.vgn, self.session_id, self.camera, arc, self._query(), self._reported_pose)
+            return Observed(scan.answer, scan.frames, scan.integration_ms, elapsed_ms(started), None)
+        integration_ms = self._observe()
+        client_started = time.perf_counter()
+        answer = self.vgn.grasps(self.session_id, **self._query())
+        client_ms = elapsed_ms(client_started)
+        return Observed(answer, len(self.views), integration_ms, elapsed_ms(started), client_ms)
+
+    def _attempt(
+        self, grasp: Grasp, disturber: Disturber
+    ) -> tuple[GraspTrial, Disturbance | None, ApproachWatch | None]:
+        """Execute ``grasp``; a drawn disturbance moves the aimed-at object during the approach,
+        and with ``closed_loop`` the approach is watched and stopped when the grasp is gone
+        (the trial is then ``INTERRUPTED``). Returns the trial, the disturbance and the watch."""
+        planned = disturber.draw()
+        watch = None
+        if self.config.closed_loop:  # what the fixed cameras see now, the hand out of view
+            views = six_views()
+            reference = [self.camera.render_depth(pose) for pose in views]
+            watch = ApproachWatch(
+                self.camera, views, reference, self.gripper.body, np.asarray(grasp.position)
+            )
+        happened: list[Disturbance | None] = []
+        target = np.asarray(grasp.position)
+
+        def on_waypoint(step: int, count: int) -> bool:
+            if planned is not None and not happened and step >= planned.step(count):
+                happened.append(disturber.apply(self.world, planned, target))
+            return watch(step, count) if watch is not None else False
+
+        trial = execute_grasp(self.world, self.gripper, grasp.as_matrix(), allow_contact=True,
+                              on_waypoint=on_waypoint, on_contact=watch.look if watch else None)  # fmt: skip
+        return trial, (happened[0] if happened else None), watch
+
+    def _query(self) -> dict:
+        """The grasp request's options, as the run's settings give them."""
+        return {"threshold": self.config.threshold, "planner": self.config.planner,
+                "clearance": self.config.clearance, "turn_average": self.config.turn_average}  # fmt: skip
+
+    def _reported_pose(self, pose: np.ndarray) -> np.ndarray:
+        """Where the service is told the camera was: the true pose, or one with pose error."""
+        return pose if self.pose_error is None else self.pose_error.perturb(pose, self.camera.rng)
+
     def _observe(self) -> float:
         """Fuse the views of the current scene into a fresh volume; total integration ms."""
-        self.session_id = fresh_session(self.vgn, self.session_id)
         total = 0.0
         for pose in self.views:
             depth = self.camera.render_depth(pose)
             # The service is told where the camera was believed to be, not where it was.
-            reported = pose if self.pose_error is None else self.pose_error.perturb(pose, self.camera.rng)
-            total += self.vgn.add_frame(self.session_id, depth, reported).integration_ms
+            total += self.vgn.add_frame(self.session_id, depth, self._reported_pose(pose)).integration_ms
         return total
 
     def _body_name(self, body: int) -> str:
@@ -231,17 +304,23 @@ class ClutterRemoval:
         )
 
 
-def _grasp_row(
-    record: RoundRecord,
-    grasp: Grasp,
-    trial: GraspTrial,
-    integration_ms: float,
-    planning_ms: float,
-    client_ms: float,
-    count: int,
-) -> dict:
+@dataclass(frozen=True)
+class Observed:
+    """A look at the scene before a grasp: the plan, the frames fused for it, their integration
+    time on the service, the time from the first frame to the plan, and the grasp request's
+    own round trip (None for a scan, which plans after every frame)."""
+
+    answer: GraspResult
+    frames: int
+    integration_ms: float
+    first_grasp_ms: float
+    client_ms: float | None
+
+
+def _grasp_row(record: RoundRecord, grasp: Grasp, trial: GraspTrial, observed: Observed) -> dict:
     qx, qy, qz, qw = grasp.orientation
     x, y, z = grasp.position
+    answer = observed.answer
     return {
         "round_id": record.round_id,
         "scene_id": record.scene_id,
@@ -255,11 +334,13 @@ def _grasp_row(
         "width": grasp.width,
         "score": grasp.quality,
         "label": trial.label,
-        "integration_time": round(integration_ms, 3),
-        "planning_time": round(planning_ms, 3),
-        "client_planning_time": round(client_ms, 3),
+        "integration_time": round(observed.integration_ms, 3),
+        "planning_time": round(answer.planning_ms, 3),
+        "client_planning_time": "" if observed.client_ms is None else observed.client_ms,
         "outcome": trial.outcome.value,
         "contact_distance": "" if trial.contact_distance is None else trial.contact_distance,
-        "grasp_count": count,
+        "grasp_count": len(answer.grasps),
         "trial_time": round(trial.seconds, 4),
+        "frames": observed.frames,
+        "first_grasp_ms": observed.first_grasp_ms,
     }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
@@ -33,6 +34,8 @@ class Outcome(str, Enum):
     NOTHING_HELD = "nothing_held"
     #: Something was between the fingers after closing but not after the lift.
     SLIPPED = "slipped"
+    #: A closed loop stopped the approach before the hand closed (the scene changed): no attempt.
+    INTERRUPTED = "interrupted"
 
 
 #: The failure classes of a benchmark table, in the order they are shown.
@@ -91,6 +94,8 @@ def execute_grasp(
     allow_contact: bool = True,
     remove_grasped: bool = True,
     fast: bool = False,
+    on_waypoint: Callable[[int, int], bool] | None = None,
+    on_contact: Callable[[], bool] | None = None,
 ) -> GraspTrial:
     """Try a grasp whose frame is ``grasp_pose`` (4×4, world; +z approach, y closing axis).
 
@@ -102,6 +107,11 @@ def execute_grasp(
     ``fast`` (for labelling data, with ``allow_contact=False``) gives the same outcomes for
     less physics: the approach is swept kinematically (any contact fails anyway), and a
     trial ends as soon as the fingers have closed on nothing.
+
+    ``on_waypoint(n, count)`` runs after each 2 mm step of the approach (a disturbance, a closed
+    loop's look at the scene); when it returns True the hand stops there, open, and the trial
+    ends ``INTERRUPTED``, which is no grasp attempt. ``on_contact()`` runs when the approach
+    stopped on contact; when it returns True the hand does not close and the trial ends so too.
     """
     if fast and allow_contact:
         raise ValueError("fast execution sweeps the approach kinematically: it needs allow_contact=False")
@@ -122,12 +132,16 @@ def execute_grasp(
     if fast:
         stopped_on_contact = not gripper.sweep_is_clear(grasp_pose)
     else:
-        stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True)
+        stopped_on_contact = gripper.move_to(grasp_pose, abort_on_contact=True, on_waypoint=on_waypoint)
+        if gripper.interrupted:
+            return finish(Outcome.INTERRUPTED, gripper.opening())
     if stopped_on_contact:
         distance = float(np.linalg.norm(grasp_pose[:3, 3] - gripper.last_contact_position))
         contact = (tuple(sorted(gripper.last_contact)), round(distance, 4))
         if not allow_contact:
             return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
+        if on_contact is not None and on_contact():
+            return finish(Outcome.INTERRUPTED, gripper.opening())
     empty = HELD_OPENING_FRACTION * gripper.spec.max_opening
     gripper.close(stop_when_empty=empty if fast else None)
     closed_on_something = gripper.opening() > empty and bool(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +48,7 @@ class Gripper:
         self.world, self.spec = world, spec
         p = world.p
         self.body = p.loadURDF(str(GRIPPER_URDF), PARKED_POSITION, (0, 0, 0, 1))
+        self.interrupted = False  # the last move_to was stopped by its on_waypoint
         names = {p.getJointInfo(self.body, j)[1].decode(): j for j in range(p.getNumJoints(self.body))}
         self.fingers = (names["left_finger_joint"], names["right_finger_joint"])
         for finger in self.fingers:
@@ -142,11 +144,18 @@ class Gripper:
 
     # Motion -------------------------------------------------------------------------------
     def move_to(
-        self, target: np.ndarray, abort_on_contact: bool, abort_below_opening: float | None = None
+        self,
+        target: np.ndarray,
+        abort_on_contact: bool,
+        abort_below_opening: float | None = None,
+        on_waypoint: Callable[[int, int], bool] | None = None,
     ) -> bool:
         """Move the hand in a straight line to ``target`` (4×4 world), orientation fixed, in
         2 mm steps at 10 cm/s. Returns True when it stopped early: on contact (with
-        ``abort_on_contact``) or when the fingers closed below ``abort_below_opening``."""
+        ``abort_on_contact``), when the fingers closed below ``abort_below_opening``, or when
+        ``on_waypoint(n, count)``, called after each of the ``count`` steps, returned True
+        (``interrupted`` is then set: a closed loop changed its mind)."""
+        self.interrupted = False
         start = self.pose()[:3, 3]
         _, orientation = pose_from_matrix(target)
         goal = target[:3, 3]
@@ -159,6 +168,9 @@ class Gripper:
                 self._back_off(start, goal, n, count, orientation)
                 return True
             if abort_below_opening is not None and self.opening() < abort_below_opening:
+                return True
+            if on_waypoint is not None and on_waypoint(n, count):
+                self.interrupted = True
                 return True
         return False
 

@@ -45,6 +45,13 @@ GRASP_COLUMNS = [
     # where the approach stopped on contact: what it touched, how far (m) before the grasp pose
     "contact",
     "contact_distance",
+    # the look before the grasp: frames fused, ms from the first frame to the plan
+    "frames",
+    "first_grasp_ms",
+    # closing the loop: "push"/"drop" when the object moved; what the closed loop did, its looks
+    "disturbance",
+    "loop",
+    "looks",
 ]
 
 

@@ -20,7 +20,9 @@ def check_results(results: Path, rounds: int) -> dict:
     round_rows = read_csv(results / "rounds.csv")
     grasp_rows = read_csv(results / "grasps.csv")
     assert len(round_rows) == summary["rounds"] == rounds
-    assert len(grasp_rows) == summary["attempts"] == sum(int(r["attempts"]) for r in round_rows)
+    # A closed loop's withdrawn approaches have rows too, but are no attempts.
+    attempted = [g for g in grasp_rows if g.get("outcome") != "interrupted"]
+    assert len(attempted) == summary["attempts"] == sum(int(r["attempts"]) for r in round_rows)
     assert summary["successes"] == sum(int(g["label"]) for g in grasp_rows)
     outcomes = summary["outcomes"]
     assert sum(outcomes.values()) == summary["attempts"], "every attempt falls in one outcome class"
@@ -30,11 +32,13 @@ def check_results(results: Path, rounds: int) -> dict:
         if g["outcome"] == "approach_contact":
             assert g["contact"] and 0 <= float(g["contact_distance"]) <= 0.05
     for r in round_rows:  # each round ends: table clear, no grasp found, or 2 failures in a row
-        labels = [int(g["label"]) for g in grasp_rows if g["round_id"] == r["round_id"]]
+        labels = [int(g["label"]) for g in attempted if g["round_id"] == r["round_id"]]
         assert "0,0" not in ",".join(map(str, labels[:-1])), "no attempt after two failures in a row"
         assert int(r["cleared"]) <= int(r["object_count"])
     for g in grasp_rows:
-        assert float(g["planning_time"]) > 0 and float(g["client_planning_time"]) >= float(g["planning_time"])
+        assert float(g["planning_time"]) > 0
+        if g["client_planning_time"]:  # a wrist scan plans after every frame: no single request
+            assert float(g["client_planning_time"]) >= float(g["planning_time"])
         assert float(g["integration_time"]) > 0
     return summary
 

@@ -85,6 +85,24 @@ def fuse(volume: SceneVolume, scene: BoxScene, views: list[np.ndarray]) -> None:
         volume.integrate(scene.depth(pose), INTRINSICS, pose, 2.0)
 
 
+def test_what_a_frame_does_not_see_is_not_forgotten():
+    """Forgetting weighs only what a frame sees again: a view from one side leaves the voxels
+    only the other side saw as they were."""
+    volume = SceneVolume(0.3, 40, np.eye(4), 40, decay=0.3)
+    fuse(volume, BOX, POSES)
+    before = volume.grid()
+    fuse(volume, BOX, [POSES[0]] * 10)
+    after = volume.grid()
+    unseen = SceneVolume(0.3, 40, np.eye(4), 40)
+    fuse(unseen, BOX, [POSES[0]])
+    weights = np.asarray(unseen.coarse._volume.extract_volume_tsdf())[:, 1].reshape(before.shape)
+    hidden = weights == 0  # voxels the first view does not update
+    assert 0.1 < hidden.mean() < 0.9
+    assert np.array_equal(before[hidden], after[hidden])
+    for v in (volume, unseen):
+        v.close()
+
+
 def difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     """(share of voxels observed in one grid only, 99th percentile of the value gap where both
     observe). A forgetting volume weighs recent views more than a fresh one does, so projective
@@ -104,9 +122,9 @@ def test_a_forgetting_volume_follows_a_moved_box_and_a_static_one_does_not(decay
     fuse(fresh, MOVED, POSES)
     only_one, gap = difference(volume.grid(), fresh.grid())
     if decay is None:
-        assert only_one > 0.01 and gap > 0.3
-    else:
-        assert only_one < 0.005 and gap < 0.2
+        assert only_one > 0.015 and gap > 0.3
+    else:  # measured: 0.5 -> (0.0047, 0.13), 0.7 -> (0.0032, 0.10); static (0.021, 0.48)
+        assert only_one < 0.008 and gap < 0.2
         assert len(volume.cloud()) > 0  # the cloud volume forgets in upload order too
     volume.close()
     fresh.close()
