@@ -9,6 +9,8 @@ import logging
 import os
 import pkgutil
 import sys
+import tempfile
+import xml.etree.ElementTree as ElementTree
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,6 +90,63 @@ class QuietBulletClient(BulletClient):
             return pybullet.getCameraImage(*args, physicsClientId=self._client, **kwargs)
 
 
+# Meshes at more than one scale ----------------------------------------------------------------
+# PyBullet's EGL renderer keeps one graphics shape per mesh it draws, keyed by the mesh file's
+# path as PyBullet resolved it from the URDF (and the visual's frame), not by its scale, until
+# resetSimulation. A mesh loaded again at another scale (by the same URDF, a removed attempt or
+# another URDF naming the same file) would be drawn at its first scale, though its collision
+# shape has the right one. Each further scale of a mesh in one simulation is therefore loaded
+# from a copy of the URDF that names the mesh by another path to the same file:
+# ``folder/./name``, ``folder/././name``, ... TinyRenderer has no such cache.
+
+
+def _drawn_meshes(robot: ElementTree.Element) -> list[ElementTree.Element]:
+    """The ``<mesh>`` elements a renderer draws: each link's visual meshes, or its collision
+    meshes where it has no visual (PyBullet then draws those)."""
+    meshes = []
+    for link in robot.iter("link"):
+        kind = "visual" if link.find("visual") is not None else "collision"
+        meshes += link.findall(f"{kind}/geometry/mesh")
+    return meshes
+
+
+def _referenced_path(urdf: Path, element: ElementTree.Element) -> str:
+    """The path a ``filename`` attribute names, as PyBullet resolves it (the URDF's folder
+    joined with it, unnormalised: that string is what the renderer's cache holds)."""
+    return os.path.join(os.path.dirname(str(urdf)), element.get("filename", ""))
+
+
+def _aliased_path(path: str, slot: int) -> str:
+    """Another name for the file at ``path``: absolute, normalised, with ``slot`` ``./`` steps
+    before its base name (slot 0: no step)."""
+    folder, name = os.path.split(os.path.abspath(path))
+    return f"{folder}/{'./' * slot}{name}"
+
+
+def _write_aliased_copy(robot: ElementTree.Element, urdf: Path, slots: dict[int, int], folder: Path) -> Path:
+    """A copy of the URDF in ``folder`` naming every file by its absolute path, and each drawn
+    mesh (by element id) by the alias of its slot. Physics reads the same files as from the
+    original."""
+    for element in robot.iter():
+        if "filename" in element.attrib:
+            path = _referenced_path(urdf, element)
+            if os.path.exists(path):
+                element.set("filename", _aliased_path(path, slots.get(id(element), 0)))
+    copy = folder / Path(urdf).name
+    ElementTree.ElementTree(robot).write(copy, encoding="utf-8", xml_declaration=True)
+    return copy
+
+
+def _loads_as_is(urdf: Path, robot: ElementTree.Element, slots: dict[int, int]) -> bool:
+    """Whether the URDF itself draws its meshes right: each at its file's first scale, named
+    by a normalised path (an unnormalised one could equal another scale's alias)."""
+    meshes = [mesh for mesh in _drawn_meshes(robot) if id(mesh) in slots]
+    paths = [_referenced_path(urdf, mesh) for mesh in meshes]
+    return all(slots[id(mesh)] == 0 for mesh in meshes) and all(
+        path == os.path.normpath(path) for path in paths
+    )
+
+
 @dataclass(frozen=True)
 class PhysicsConfig:
     """VGN's simulation parameters, so figures compare with the paper."""
@@ -123,6 +182,13 @@ class World:
         self.p = QuietBulletClient(pybullet.DIRECT)
         self.egl = renderer in ("egl", "auto") and self._load_egl(required=renderer == "egl")
         self.objects: dict[int, SimObject] = {}
+        #: False draws as PyBullet's EGL renderer does by itself, each mesh at the first scale it
+        #: was loaded at: only to recognise observations drawn so. Change it before a reset.
+        self.alias_scaled_meshes = True
+        #: Per mesh file (real path): the scales it was loaded at in this simulation, in order,
+        #: each as (its URDF's ``scale`` attribute, global scale); a scale's index is the alias
+        #: the mesh is loaded by.
+        self._mesh_scales: dict[str, list[tuple[str, float]]] = {}
         self._set_up()
 
     def _set_up(self) -> None:
@@ -131,6 +197,7 @@ class World:
         )
         self.p.setGravity(0.0, 0.0, self.config.gravity)
         self.objects = {}
+        self._mesh_scales = {}  # a new simulation: the EGL renderer has forgotten its shapes
         self.table = self._create_table()
         self.sim_time = 0.0
 
@@ -179,11 +246,44 @@ class World:
         orientation: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0, 1.0),
         scale: float = 1.0,
     ) -> int:
-        """Load an object URDF at a pose ([x, y, z], [x, y, z, w]) with a uniform scale."""
-        body = self.p.loadURDF(str(urdf), list(position), list(orientation), globalScaling=scale)
+        """Load an object URDF at a pose ([x, y, z], [x, y, z, w]) with a uniform scale. The
+        object keeps ``urdf`` as its file even when it was loaded from an aliased copy."""
+        with self._drawable_urdf(Path(urdf), scale) as loadable:
+            body = self.p.loadURDF(str(loadable), list(position), list(orientation), globalScaling=scale)
         self.p.changeDynamics(body, -1, lateralFriction=self.config.object_friction)
         self.objects[body] = SimObject(body, Path(urdf), scale)
         return body
+
+    @contextlib.contextmanager
+    def _drawable_urdf(self, urdf: Path, scale: float) -> Iterator[Path]:
+        """The URDF to load so that EGL draws each of its meshes at ``scale``: ``urdf`` itself
+        where every mesh is at its first scale in this simulation, else an aliased copy that
+        lives while it is loaded."""
+        if not (self.egl and self.alias_scaled_meshes):
+            yield urdf
+            return
+        robot = ElementTree.parse(urdf).getroot()
+        slots = self._mesh_slots(urdf, robot, scale)
+        if _loads_as_is(urdf, robot, slots):
+            yield urdf
+            return
+        with tempfile.TemporaryDirectory(prefix="vgn-urdf-") as folder:
+            yield _write_aliased_copy(robot, urdf, slots, Path(folder))
+
+    def _mesh_slots(self, urdf: Path, robot: ElementTree.Element, scale: float) -> dict[int, int]:
+        """Each drawn mesh file's alias slot (by element id) for ``scale``: the index of the
+        scale among those its file was loaded at in this simulation, ``scale`` noted."""
+        slots = {}
+        for mesh in _drawn_meshes(robot):
+            path = _referenced_path(urdf, mesh)
+            if not os.path.isfile(path):  # package:// names and the like: left as they are
+                continue
+            scales = self._mesh_scales.setdefault(os.path.realpath(path), [])
+            drawn_at = (mesh.get("scale", ""), scale)
+            if drawn_at not in scales:
+                scales.append(drawn_at)
+            slots[id(mesh)] = scales.index(drawn_at)
+        return slots
 
     def clear_objects(self) -> None:
         """Remove every object, keeping the table (and any gripper)."""
