@@ -92,6 +92,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "results go to folders ending in -turns (the antipodal planner is unaffected)",
     )
     parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
+    parser.add_argument("--disturb", type=float, default=0.0, metavar="P",
+                        help="displace the aimed-at object during the approach with probability P per attempt "
+                        "(docs/closed-loop.md); folders end in -disturbP")  # fmt: skip
+    parser.add_argument("--closed-loop", action="store_true",
+                        help="watch the approach and withdraw when the scene around the grasp changed; folders end in "
+                        "-closed")  # fmt: skip
+    parser.add_argument("--scan", choices=["fixed", "wrist"], default="fixed",
+                        help="look with the fixed views, or a wrist camera's arc that stops once the best grasp is "
+                        "stable; folders end in -wrist")  # fmt: skip
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     parser.add_argument(
         "--torch-threads",
@@ -143,6 +152,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
         planner=planner, renderer=args.renderer, noise=args.noise, views=args.views, clearance=args.clearance,
         sensor=args.sensor, pose_error=args.pose_error,
         turn_average=args.turn_average if planner == "vgn" else False,
+        disturb=args.disturb, closed_loop=args.closed_loop, scan=args.scan,
     )  # fmt: skip
 
 
@@ -155,6 +165,10 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
                 suffix += (f"-{args.sensor}" if args.sensor else "") + ("-pose" if args.pose_error else "")
                 suffix += "-turns" if args.turn_average and planner == "vgn" else ""
                 suffix += "-clearance" if args.clearance else ""
+                suffix += (f"-disturb{args.disturb:g}" if args.disturb else "") + (
+                    "-closed" if args.closed_loop else ""
+                )
+                suffix += "-wrist" if args.scan == "wrist" else ""
                 yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}{suffix}"
 
 
@@ -270,7 +284,9 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     lines = [
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
         f"{args.views} view(s){', depth noise' if args.noise else ''}"
-        f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}",
+        f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
+        f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}"
+        f"{', wrist scan' if args.scan == 'wrist' else ''}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
         "| failures: approach contact / nothing held / slipped / collision | planning p50 ms | paper VGN ε=0.9 | paper GPD |",

@@ -33,9 +33,9 @@ from sim_worker.camera import WORKSPACE_CENTRE, Camera, camera_on_sphere
 
 #: The fixed cameras look every this many 2 mm approach steps: 0.1 s at 10 cm/s, 10 Hz.
 WATCH_EVERY_STEPS = 5
-#: A look counts as a change when more than ``CHANGED_SHARE`` of the pixels that saw the scene
-#: within ``CHANGE_RADIUS`` of the grasp, in both images and not on the hand, moved in depth by
-#: more than ``CHANGED_DEPTH``.
+#: A look counts as a change when, in some view, more than ``CHANGED_SHARE`` of the pixels that
+#: saw the scene within ``CHANGE_RADIUS`` of the grasp when it was planned (and do not see the
+#: hand now) moved in depth by more than ``CHANGED_DEPTH``.
 CHANGE_RADIUS = 0.06
 CHANGED_DEPTH = 0.01
 CHANGED_SHARE = 0.15
@@ -69,39 +69,42 @@ class ApproachWatch:
             return False
         return self.look()
 
+    def __post_init__(self) -> None:
+        # Where each view saw the scene near the grasp when it was planned, and the box around it.
+        self._near = [
+            near_target(self.camera, pose, depth, self.target)
+            for pose, depth in zip(self.views, self.reference, strict=True)
+        ]
+
     def look(self) -> bool:
         """Render every view and compare it with its reference; True when the scene changed."""
         self.looks += 1
-        shares = [
-            changed_share(
-                self.camera, pose, before, self.camera.render_depth(pose, hide=(self.hand,)), self.target
-            )
-            for pose, before in zip(self.views, self.reference, strict=True)
-        ]
+        shares = []
+        for pose, before, (near, box) in zip(self.views, self.reference, self._near, strict=True):
+            if box is None:
+                continue
+            after = self.camera.render_depth(pose, hide=(self.hand,))[box]
+            seen = near[box] & (after > 0)
+            if seen.any():
+                shares.append(float(np.mean(np.abs(after[seen] - before[box][seen]) > CHANGED_DEPTH)))
         self.changed = max([self.changed, *shares])
-        return max(shares) > CHANGED_SHARE
+        return bool(shares) and max(shares) > CHANGED_SHARE
 
 
-def changed_share(
-    camera: Camera, pose: np.ndarray, before: np.ndarray, after: np.ndarray, target: np.ndarray
-) -> float:
-    """The share of the pixels of one view that saw the scene within ``CHANGE_RADIUS`` of
-    ``target`` (before or after; 0 depth, as where the hand is, does not count) and whose
-    depth changed by more than ``CHANGED_DEPTH``."""
-    both = (before > 0) & (after > 0)
-    near = both & (_near(camera, pose, before, target) | _near(camera, pose, after, target))
-    if not near.any():
-        return 0.0
-    return float(np.mean(np.abs(after[near] - before[near]) > CHANGED_DEPTH))
-
-
-def _near(camera: Camera, pose: np.ndarray, depth: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Pixels whose back-projected point lies within ``CHANGE_RADIUS`` of ``target``."""
+def near_target(
+    camera: Camera, pose: np.ndarray, depth: np.ndarray, target: np.ndarray
+) -> tuple[np.ndarray, tuple[slice, slice] | None]:
+    """The pixels of a view whose back-projected point lies within ``CHANGE_RADIUS`` of
+    ``target``, and the smallest box holding them (None when there are none)."""
     i = camera.intrinsics
     v, u = np.indices(depth.shape)
     rays = np.stack([(u - i.cx) / i.fx, (v - i.cy) / i.fy, np.ones(depth.shape)], axis=-1)
     points = (rays * depth[..., None]) @ pose[:3, :3].T + pose[:3, 3]
-    return np.linalg.norm(points - target, axis=-1) < CHANGE_RADIUS
+    near = (depth > 0) & (np.linalg.norm(points - target, axis=-1) < CHANGE_RADIUS)
+    if not near.any():
+        return near, None
+    rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
+    return near, (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
 
 
 def wrist_arc(azimuth: float, frames: int = WRIST_FRAMES) -> list[np.ndarray]:

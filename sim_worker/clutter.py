@@ -185,6 +185,7 @@ class ClutterRemoval:
         # Disturbances draw from a stream of their own, so open and closed loop meet the same ones.
         disturber = Disturber(self.config.disturb, np.random.default_rng([self.config.seed, round_id, 7]))
         failures = aborts = 0
+        withdrawn_from: Disturbance | None = None
         while self.world.objects and failures < MAX_CONSECUTIVE_FAILURES:
             observed = self._look(rng)
             if not observed.answer.grasps:
@@ -192,16 +193,20 @@ class ClutterRemoval:
             grasp = self._select(observed.answer.grasps, rng)
             if self.image_dir is not None:
                 self._save_image(record, grasp)
-            trial, disturbance, watch = self._attempt(grasp, disturber)
+            # A retry after the closed loop withdrew belongs to the same attempt: no new disturbance.
+            trial, disturbance, watch = self._attempt(grasp, disturber, retry=aborts > 0)
             row = _grasp_row(record, grasp, trial, observed)
             row["contact"] = "+".join(self._body_name(body) for body in trial.contact_bodies)
-            row["disturbance"] = disturbance.kind if disturbance else ""
+            # A retry after a withdrawal belongs to the disturbed attempt: it carries its disturbance.
+            carried = disturbance or (withdrawn_from if aborts else None)
+            row["disturbance"] = carried.kind if carried else ""
             if watch is not None:
                 stopped = trial.outcome is Outcome.INTERRUPTED
                 row["loop"] = "stopped" if stopped else "retried" if aborts else "kept"
                 row["looks"] = watch.looks
             record.grasps.append(row)
             if trial.outcome is Outcome.INTERRUPTED:  # the closed loop withdrew: no attempt, look again
+                withdrawn_from = carried
                 aborts += 1
                 if aborts >= MAX_STOPS_IN_A_ROW:
                     break
@@ -233,12 +238,12 @@ class ClutterRemoval:
         return Observed(answer, len(self.views), integration_ms, elapsed_ms(started), client_ms)
 
     def _attempt(
-        self, grasp: Grasp, disturber: Disturber
+        self, grasp: Grasp, disturber: Disturber, retry: bool = False
     ) -> tuple[GraspTrial, Disturbance | None, ApproachWatch | None]:
         """Execute ``grasp``; a drawn disturbance moves the aimed-at object during the approach,
         and with ``closed_loop`` the approach is watched and stopped when the grasp is gone
         (the trial is then ``INTERRUPTED``). Returns the trial, the disturbance and the watch."""
-        planned = disturber.draw()
+        planned = None if retry else disturber.draw()
         watch = None
         if self.config.closed_loop:  # what the fixed cameras see now, the hand out of view
             views = six_views()

@@ -54,6 +54,8 @@ def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) 
     planning, client_planning = _floats(grasps, "planning_time"), _floats(grasps, "client_planning_time")
     integration = _floats(grasps, "integration_time")
     round_seconds = _floats(rounds, "seconds")
+    attempted = [row for row in grasps if row.get("outcome") != "interrupted"]
+    disturbed = [row for row in attempted if row.get("disturbance")]
 
     def stats(values: list[float]) -> dict[str, float] | None:
         return {"mean": round(mean(values), 2), "p50": round(median(values), 2)} if values else None
@@ -73,6 +75,13 @@ def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) 
         "client_planning_ms": stats(client_planning),
         "integration_ms": stats(integration),
         "round_seconds": stats(round_seconds),
+        # Closing the loop: frames fused and time from the first frame to the plan of each look
+        # before a grasp; the disturbed attempts; the closed loop's withdrawn approaches.
+        "frames_per_plan": stats(_floats(grasps, "frames")),
+        "first_grasp_ms": stats(_floats(grasps, "first_grasp_ms")),
+        "disturbed_attempts": len(disturbed),
+        "disturbed_successes": sum(int(row["label"]) for row in disturbed),
+        "withdrawn": sum(row.get("outcome") == "interrupted" for row in grasps),
     }
 
 
