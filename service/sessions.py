@@ -14,6 +14,7 @@ from typing import Any
 from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
 from service.cloud_fusion import CloudFusion, shared_fusion
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
+from service.snapshot import Snapshot
 from service.tsdf import SceneVolume
 
 
@@ -91,9 +92,11 @@ class SessionStore:
         self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()
 
-    def create(self, spec: SessionCreate) -> Session:
+    def create(self, spec: SessionCreate, snapshot: Snapshot | None = None) -> Session:
         """Register a new session, dropping expired ones first and
-        evicting the least recently used idle one at the limit."""
+        evicting the least recently used idle one at the limit. With a ``snapshot`` (whose
+        settings ``spec`` carries) the session starts from its volumes and counts, never
+        visible half restored."""
         now = self._clock()
         workspace = spec.workspace
         volume = SceneVolume(
@@ -104,6 +107,8 @@ class SessionStore:
             self._cloud_max_pending,
             self.cloud_fusion,
         )
+        if snapshot is not None:
+            volume.restore(snapshot.coarse, snapshot.fine)
         with self._lock:
             self._drop_expired(now)
             session_id = spec.session_id or uuid.uuid4().hex
@@ -112,6 +117,8 @@ class SessionStore:
             if len(self._sessions) >= self.max_sessions:
                 self._evict_one()
             session = Session(session_id, workspace, spec.intrinsics, volume, now, now)
+            if snapshot is not None:
+                session.frame_count, session.integration_ms = snapshot.frame_count, snapshot.integration_ms
             self._sessions[session_id] = session
             return session
 
