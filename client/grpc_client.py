@@ -137,6 +137,11 @@ class GRPCClient:
             raise error_of(error) from None
         return parse(answer)
 
+    @property
+    def rebuilds(self) -> int:
+        """As ``VGNClient.rebuilds``."""
+        return self._journal.rebuilds
+
     def _routed(self, session_id: str | None) -> tuple[tuple[str, str], ...]:
         """The call's metadata: the API key, and the session id a proxy routes by."""
         return self._metadata + (((SESSION_ID_KEY, session_id),) if session_id else ())

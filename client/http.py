@@ -396,6 +396,11 @@ class VGNClient:
     def _run(self, call: Call[T]) -> T:
         return call.parse(raise_for_error(self._http.request(call.method, call.path, **call.kwargs)))
 
+    @property
+    def rebuilds(self) -> int:
+        """Sessions this client rebuilt after finding them lost with their replica."""
+        return self._journal.rebuilds
+
     def _on_session(self, session_id: str, call: Call[T]) -> T:
         """``call``, rebuilding the session first if it was lost with its replica."""
         return self._journal.call(session_id, lambda: self._run(call), self._transport)
@@ -535,6 +540,11 @@ class AsyncVGNClient:
 
     async def _run(self, call: Call[T]) -> T:
         return call.parse(raise_for_error(await self._http.request(call.method, call.path, **call.kwargs)))
+
+    @property
+    def rebuilds(self) -> int:
+        """As ``VGNClient.rebuilds``."""
+        return self._journal.rebuilds
 
     async def _on_session(self, session_id: str, call: Call[T]) -> T:
         return await self._journal.acall(session_id, lambda: self._run(call), self._transport)

@@ -172,6 +172,7 @@ class SessionJournal:
 
     def __init__(self, replay: Replay | None = DEFAULT_REPLAY) -> None:
         self.replay = replay
+        self.rebuilds = 0  # sessions rebuilt so far
         self._kept: dict[str, _Kept] = {}
         self._lock = threading.Lock()
 
@@ -310,6 +311,7 @@ class SessionJournal:
                     if kept.generation == generation:  # nobody rebuilt it since it failed
                         rebuild(transport, plan)
                         kept.generation += 1
+                        self.rebuilds += 1
                     generation = kept.generation
                 return send()
             except Exception as error:
@@ -340,6 +342,7 @@ class SessionJournal:
                     if kept.generation == generation:
                         await arebuild(transport, plan)
                         kept.generation += 1
+                        self.rebuilds += 1
                     generation = kept.generation
                 return await send()
             except Exception as error:
