@@ -49,6 +49,7 @@ class FleetConfig:
     grpc_port: int | None = 50051
     model: Path | str | None = None
     env: dict[str, str] = field(default_factory=dict)
+    unset: tuple[str, ...] = ()  # variables of this process the replicas must not inherit
     restart: bool = True
     startup_timeout_s: float = 180.0
     check_interval_ms: int = 1000
@@ -115,6 +116,7 @@ class Fleet:
         return EmbeddedService(
             model=self.config.model,
             env=self.config.env,
+            unset=self.config.unset,
             host="127.0.0.1",
             port=port,
             grpc=True,

@@ -22,6 +22,7 @@ import asyncio
 import threading
 import time
 import uuid
+from collections import OrderedDict
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
@@ -41,12 +42,14 @@ class Replay:
 
     ``max_frames`` and ``max_bytes`` bound the frames kept since the session's last reset (their
     encoded bytes, as sent: a 640×480 float32 frame is 1.2 MB, a 16-bit PNG of it about 0.1 MB),
-    snapshot included. ``attempts`` rebuilds are tried for one call, ``backoff_s`` apart at first
+    snapshot included; ``max_sessions`` the sessions kept (the least recently used beyond it can
+    no longer be rebuilt). ``attempts`` rebuilds are tried for one call, ``backoff_s`` apart at first
     and twice as long each time, while the proxy notices the lost replica.
     """
 
     max_frames: int = 64
     max_bytes: int = 128 * 2**20
+    max_sessions: int = 256
     attempts: int = 4
     backoff_s: float = 0.25
 
@@ -173,7 +176,7 @@ class SessionJournal:
     def __init__(self, replay: Replay | None = DEFAULT_REPLAY) -> None:
         self.replay = replay
         self.rebuilds = 0  # sessions rebuilt so far
-        self._kept: dict[str, _Kept] = {}
+        self._kept: OrderedDict[str, _Kept] = OrderedDict()  # least recently used first
         self._lock = threading.Lock()
 
     def opened(self, spec: SessionCreate, snapshot: bytes | None = None, base_frames: int = 0) -> None:
@@ -183,6 +186,9 @@ class SessionJournal:
         kept = _Kept(Rebuild(spec, None, base_frames, []))
         with self._lock:
             self._kept[spec.session_id] = kept
+            self._kept.move_to_end(spec.session_id)
+            while len(self._kept) > self.replay.max_sessions:
+                self._kept.popitem(last=False)
         if snapshot is not None:
             with kept.lock:
                 self._keep(kept, len(snapshot), lambda: setattr(kept.rebuild, "snapshot", snapshot))
@@ -211,13 +217,16 @@ class SessionJournal:
                 kept.nbytes, kept.overflowed = 0, True
 
     def forget(self, session_id: str) -> bool:
-        """The session was deleted; whether it was one of this client's."""
+        """The session was deleted, or ended on the service; whether it was one of this client's."""
         with self._lock:
             return self._kept.pop(session_id, None) is not None
 
     def _get(self, session_id: str) -> _Kept | None:
         with self._lock:
-            return self._kept.get(session_id)
+            kept = self._kept.get(session_id)
+            if kept is not None:
+                self._kept.move_to_end(session_id)
+            return kept
 
     def _keep(self, kept: _Kept, nbytes: int, keep: Callable[[], None]) -> None:
         """Keep a frame or snapshot (``kept.lock`` held), or give up on the session past the bounds."""
@@ -239,7 +248,7 @@ class SessionJournal:
             rebuild = kept.rebuild
             return Rebuild(rebuild.spec, rebuild.snapshot, rebuild.base_frames, list(rebuild.frames))
 
-    # Drivers ------------------------------------------------------------------------------------
+    # Opening sessions ---------------------------------------------------------------------------
     def open(self, transport: Transport, plan: Rebuild) -> Any:
         """Open a new session (its ``SessionInfo``) and keep it. A first try that fails as on a
         lost replica is retried; a taken id then is taken by that first try, which did land."""
@@ -248,7 +257,18 @@ class SessionJournal:
         except Exception as error:
             if self.replay is None or not is_lost(error):
                 raise
-            info = self._retry_open(error, lambda: rebuild(transport, plan), time.sleep)
+            failure: Exception = error
+            for attempt in range(self.replay.attempts):
+                time.sleep(self.replay.backoff_s * 2**attempt)
+                try:
+                    info = rebuild(transport, plan)
+                    break
+                except Exception as again:
+                    if not is_lost(again):
+                        raise
+                    failure = again
+            else:
+                raise failure from None
         self.opened(plan.spec, plan.snapshot, plan.base_frames)
         return info
 
@@ -274,21 +294,7 @@ class SessionJournal:
         self.opened(plan.spec, plan.snapshot, plan.base_frames)
         return info
 
-    def _retry_open(
-        self, failure: Exception, again: Callable[[], Any], sleep: Callable[[float], None]
-    ) -> Any:
-        assert self.replay is not None
-        for attempt in range(self.replay.attempts):
-            sleep(self.replay.backoff_s * 2**attempt)
-            try:
-                return again()
-            except Exception as error:
-                if not is_lost(error):
-                    raise
-                failure = error
-        raise failure
-
-    # Drivers of calls on a session ------------------------------------------------------------------------------------
+    # Calls on a session -------------------------------------------------------------------------
     def call(self, session_id: str, send: Callable[[], T], transport: Transport) -> T:
         """``send()``; if it fails as on a lost replica and the session is kept, rebuild it
         (once for concurrent callers) and send again, ``Replay.attempts`` times at most. Any
@@ -298,6 +304,8 @@ class SessionJournal:
         try:
             return send()
         except Exception as error:
+            if getattr(error, "ended", None):
+                self.forget(session_id)  # it ended on the service: nothing to rebuild, ever
             if kept is None or not is_lost(error):
                 raise
             failure: Exception = error
@@ -328,6 +336,8 @@ class SessionJournal:
         try:
             return await send()
         except Exception as error:
+            if getattr(error, "ended", None):
+                self.forget(session_id)
             if kept is None or not is_lost(error):
                 raise
             failure: Exception = error
