@@ -230,7 +230,9 @@ class GRPCClient:
 
     def import_session(self, snapshot: bytes, session_id: str | None = None) -> SessionInfo:
         """Not over gRPC: snapshots are imported by the HTTP front end (``VGNClient.import_session``)."""
-        raise NotImplementedError("session snapshots are imported over HTTP only: POST /sessions/import")
+        raise NotImplementedError(
+            "session snapshots are imported over HTTP only: PUT /sessions/{id}/snapshot"
+        )
 
     # Frames -------------------------------------------------------------------------------
     def add_frame(

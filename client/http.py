@@ -240,9 +240,8 @@ class Calls:
 
     @staticmethod
     def import_session(snapshot: bytes, session_id: str) -> Call[SessionInfo]:
-        kwargs = {"content": snapshot, "params": {"session_id": session_id},
-                  "headers": {"Content-Type": SNAPSHOT_MEDIA_TYPE}}  # fmt: skip
-        return Call("POST", "/sessions/import", _model(SessionInfo), kwargs).routed(session_id)
+        kwargs = {"content": snapshot, "headers": {"Content-Type": SNAPSHOT_MEDIA_TYPE}}
+        return Call("PUT", f"/sessions/{session_id}/snapshot", _model(SessionInfo), kwargs).routed(session_id)
 
     @staticmethod
     def snapshot(session_id: str) -> Call[bytes]:

@@ -7,7 +7,7 @@ import secrets
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
+from fastapi import APIRouter, Depends, Header, HTTPException, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
@@ -143,33 +143,6 @@ SNAPSHOT_BODY = {
 }
 
 
-@api.post(
-    "/sessions/import",
-    status_code=201,
-    response_model=SessionInfo,
-    responses={409: {"model": ErrorResponse}},
-    openapi_extra=SNAPSHOT_BODY,
-)
-async def import_session(
-    service: Core,
-    request: Request,
-    session_id: Annotated[
-        str | None,
-        Query(pattern=SESSION_ID_PATTERN, description="id of the new session; default: the snapshot's"),
-    ] = None,
-) -> SessionInfo:
-    """Open a session from a snapshot (`GET /sessions/{session_id}/snapshot`): the same volumes,
-    settings and frame count, under the snapshot's id or `session_id`; 400 for a damaged or
-    foreign file, 409 for a taken id. Moves a session between services (draining a replica)."""
-    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    if media_type != SNAPSHOT_MEDIA_TYPE:
-        raise UnsupportedMediaType(
-            f"a snapshot is sent as {SNAPSHOT_MEDIA_TYPE}, got {media_type or 'no content type'!r}"
-        )
-    data = await request.body()
-    return await run_in_threadpool(service.import_session, data, session_id)
-
-
 @api.get("/sessions", response_model=SessionList)
 def list_sessions(service: Core) -> SessionList:
     """Every live session, and how many the service keeps at most."""
@@ -196,8 +169,33 @@ def delete_session(service: Core, session_id: str) -> Response:
 )
 def snapshot(service: Core, session_id: str) -> Response:
     """The session as one compact file (`.npz`: settings, frame count, the fused volumes), for
-    `POST /sessions/import` on this or another service; the session stays as it was."""
+    `PUT /sessions/{session_id}/snapshot` on this or another service; the session stays as it was."""
     return Response(service.export_session(session_id), media_type=SNAPSHOT_MEDIA_TYPE)
+
+
+@api.put(
+    "/sessions/{session_id}/snapshot",
+    status_code=201,
+    response_model=SessionInfo,
+    responses={409: {"model": ErrorResponse}},
+    openapi_extra=SNAPSHOT_BODY,
+)
+async def import_session(
+    service: Core,
+    session_id: Annotated[str, Path(pattern=SESSION_ID_PATTERN, description="id of the new session")],
+    request: Request,
+) -> SessionInfo:
+    """Open the session `session_id` from a snapshot (`GET /sessions/{id}/snapshot` of any
+    session): the same volumes, settings and frame count; 400 for a damaged or foreign file,
+    409 for a taken id (a snapshot never overwrites a session). Moves a session between
+    services (draining a replica)."""
+    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if media_type != SNAPSHOT_MEDIA_TYPE:
+        raise UnsupportedMediaType(
+            f"a snapshot is sent as {SNAPSHOT_MEDIA_TYPE}, got {media_type or 'no content type'!r}"
+        )
+    data = await request.body()
+    return await run_in_threadpool(service.import_session, data, session_id)
 
 
 @api.post("/sessions/{session_id}/reset", response_model=SessionInfo)

@@ -45,7 +45,7 @@ SHORT_EXAMPLES = 8
 SHORT_WORKFLOWS = 6
 SLOW_EXAMPLES = int(os.environ.get("VGN_FUZZ_EXAMPLES", "200"))
 FRAMES_OPERATION = "POST /sessions/{session_id}/frames"
-IMPORT_OPERATION = "POST /sessions/import"
+IMPORT_OPERATION = "PUT /sessions/{session_id}/snapshot"
 #: Snapshot bodies: an empty session's (valid), and bytes that are none.
 EMPTY_SNAPSHOT = encode(
     Snapshot("fuzz", Workspace(resolution=16), None, 0, 0.0, np.zeros((16**3, 2), np.float32), None)

@@ -58,7 +58,7 @@ def rewritten(data: bytes, **changes: object) -> bytes:
 def test_an_imported_session_carries_on_as_the_original(http):
     data = fused_session(http, "original")
     assert fmt.session_id_of(data) == "original" and len(data) < 2_000_000
-    imported = http.post("/sessions/import?session_id=copy", content=data, headers=NPZ)
+    imported = http.put("/sessions/copy/snapshot", content=data, headers=NPZ)
     assert imported.status_code == 201, imported.text
     original = http.get("/sessions/original").json()
     assert imported.json()["frame_count"] == 3 and imported.json()["workspace"] == original["workspace"]
@@ -76,11 +76,11 @@ def test_an_imported_session_carries_on_as_the_original(http):
     )
 
 
-def test_import_under_the_snapshots_own_id_and_a_taken_one(http):
+def test_a_snapshot_never_overwrites_a_session(http):
     data = fused_session(http, "moving", views=1)
-    assert http.post("/sessions/import", content=data, headers=NPZ).status_code == 409
+    assert http.put("/sessions/moving/snapshot", content=data, headers=NPZ).status_code == 409
     assert http.delete("/sessions/moving").status_code == 204
-    response = http.post("/sessions/import", content=data, headers=NPZ)
+    response = http.put("/sessions/moving/snapshot", content=data, headers=NPZ)
     assert response.status_code == 201 and response.json()["session_id"] == "moving"
 
 
@@ -115,14 +115,12 @@ def test_import_under_the_snapshots_own_id_and_a_taken_one(http):
 )
 def test_a_bad_snapshot_is_refused_with_its_reason(http, change, words):
     data = fused_session(http, "source", views=1)
-    response = http.post("/sessions/import?session_id=target", content=change(data), headers=NPZ)
+    response = http.put("/sessions/target/snapshot", content=change(data), headers=NPZ)
     assert response.status_code == 400 and words in response.json()["detail"], response.text
     assert http.get("/sessions/target").status_code == 404
 
 
 def test_a_snapshot_needs_its_media_type(http):
     data = fused_session(http, "typed", views=1)
-    response = http.post(
-        "/sessions/import?session_id=t2", content=data, headers={"Content-Type": "application/json"}
-    )
+    response = http.put("/sessions/t2/snapshot", content=data, headers={"Content-Type": "application/json"})
     assert response.status_code == 415 and fmt.MEDIA_TYPE in response.json()["detail"]
