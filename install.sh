@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Install vgn-service into the current Python with the exact versions CI tested (requirements/).
 #   bash install.sh         the service and the simulator: what `vgn-client clear-scene --sim` needs
-#   bash install.sh --dev   every extra with the test tools (and Chromium for the browser test): CI's
+#   bash install.sh --dev   every extra with the test tools (Chromium for the browser test, HAProxy for the fleet's): CI's
 # Open3D needs a few system libraries (libusb-1.0 above all); they are installed here when
 # missing (apt-based systems).
 set -euo pipefail
@@ -31,6 +31,18 @@ if [ ${#missing[@]} -gt 0 ]; then
     $sudo apt-get update -qq && $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
   else
     echo "warning: missing system libraries for open3d: ${missing[*]}; install them with your package manager" >&2
+  fi
+fi
+
+# HAProxy for the fleet tests (tests/fleet/: replicas behind the proxy `vgn-client serve --replicas` runs).
+if [ "$dev" = 1 ] && ! command -v haproxy >/dev/null 2>&1; then
+  if command -v apt-get >/dev/null 2>&1; then
+    sudo=""
+    [ "$(id -u)" -ne 0 ] && sudo="sudo"
+    echo "installing haproxy (the fleet tests)"
+    $sudo apt-get update -qq && $sudo apt-get install -y -qq haproxy >/dev/null
+  else
+    echo "warning: haproxy is missing; the fleet tests will fail" >&2
   fi
 fi
 

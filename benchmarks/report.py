@@ -20,7 +20,8 @@ Inputs:
   ``service/models/vgn.card.json`` (the shipped model's card).
 
 Outputs in ``docs/generated/`` (included into the pages by ``pymdownx.snippets``): ``clutter.md``,
-``latency.md``, ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
+``latency.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
+``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
 results exist, the block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` in
 README.md is rewritten with the headline table too (without dates: the benchmark page carries them).
 """
@@ -339,6 +340,50 @@ def target_row(target: Any) -> str:
     return f"| {cell(target)} | - | - |"
 
 
+# Fleet ----------------------------------------------------------------------------------------
+def fleet_page(results: Path) -> str:
+    """Every ``fleet.json`` (``python -m benchmarks.fleet``): the proxy's added latency and the
+    throughput of one and two replicas."""
+    runs = [(path, json.loads(path.read_text())) for path in sorted(results.rglob("fleet.json"))]
+    if not runs:
+        return (
+            "No fleet result files are in `docs/results/` yet. Run `python -m benchmarks.fleet --json "
+            "docs/results/NAME/fleet.json`, then `python -m benchmarks.report --stamp docs/results/NAME` and "
+            "`python -m benchmarks.report`.\n"
+        )
+    parts = []
+    for path, report in runs:
+        env, rates = report.get("environment") or {}, report["throughput"]
+        facts = [f"measured on {machine_text(latency_measured(path, report))}", env.get("haproxy", "HAProxy"),
+                 f"{env.get('repeats', '-')} timed calls per row, interleaved",
+                 f"load average at start {(env.get('load_average_at_start') or ['-'])[0]}"]  # fmt: skip
+        parts.append(f"#### `{relative(path.parent, results)}`\n")
+        parts.append("; ".join(facts) + ".\n")
+        lines = ["| grasp request | p50 ms | p95 ms |", "| --- | ---: | ---: |"]
+        lines += [f"| {cell(row['name'])} | {row['p50_ms']:.2f} | {row['p95_ms']:.2f} |"
+                  for row in report["latency"]["results"]]  # fmt: skip
+        for transport, diff in report["latency"]["added"].items():
+            interval = diff.get("p50_ci95_ms")
+            spread = f" (95 % interval {interval[0]:+.2f} to {interval[1]:+.2f})" if interval else ""
+            lines.append(f"| added by HAProxy, {'HTTP' if transport == 'http' else 'gRPC'} | "
+                         f"{diff['p50_ms']:+.2f}{spread} | {diff['p95_ms']:+.2f} |")  # fmt: skip
+        parts.append("\n".join(lines) + "\n")
+        one, two = rates["one_replica"], rates["two_replicas"]
+        parts.append("\n".join([
+            f"| throughput, {rates['workers']} clients ({cell(rates['cycle'])}) | cycles/s, median | range over "
+            f"{rates['rounds']} windows of {rates['window_s']:g} s |",
+            "| --- | ---: | --- |",
+            f"| 1 replica | {one['cycles_per_s']:.2f} | {one['min']:.2f}-{one['max']:.2f} |",
+            f"| 2 replicas | {two['cycles_per_s']:.2f} | {two['min']:.2f}-{two['max']:.2f} |",
+            f"| speed-up (paired windows) | {rates['speedup']:.2f}x | {rates['speedup_range'][0]:.2f}-"
+            f"{rates['speedup_range'][1]:.2f}x; {rates['efficiency_per_core']:.2f} per core of {rates['cores']} |",
+        ]) + "\n")  # fmt: skip
+        if report.get("targets"):
+            parts.append("\n".join(["| target | value | result |", "| --- | --- | --- |"]
+                                   + [target_row(t) for t in report["targets"]]) + "\n")  # fmt: skip
+    return "\n".join(parts)
+
+
 # Reference pages ------------------------------------------------------------------------------
 #: Meanings for settings whose field has no description.
 SETTING_NOTES = {
@@ -633,6 +678,7 @@ def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
     return {
         "clutter.md": ("docs/results/**/table.json", lambda: clutter_page(results)),
         "latency.md": ("docs/results/**/latency.json", lambda: latency_page(results)),
+        "fleet.md": ("docs/results/**/fleet.json", lambda: fleet_page(results)),
         "training-data.md": (
             "data/manifest.json, docs/results/**/recipe-training.json",
             lambda: training_data_page(json.loads(DATA_MANIFEST.read_text()), results),

@@ -74,15 +74,21 @@ def timed(call: Callable[[int], object], i: int, prepare: Callable[[int], object
     return (time.perf_counter() - started) * 1e3
 
 
-def run_interleaved(operations: list[Operation], repeats: int, warmup: int) -> list[Measurement]:
+def run_interleaved(
+    operations: list[Operation], repeats: int, warmup: int, rotate: bool = False
+) -> list[Measurement]:
     """Round-robin: each round calls every operation once; the first ``warmup`` rounds are
-    not recorded."""
+    not recorded. ``rotate``: round i starts at operation i (mod their count), so that no
+    operation always follows the same one (what ran just before can cost the next call: a
+    server thread that went idle, caches another front end filled)."""
     rows = [Measurement(op.name, op.group, note=op.note) for op in operations]
+    order = list(range(len(operations)))
     for i in range(warmup + repeats):
-        for op, row in zip(operations, rows, strict=True):
-            elapsed = timed(op.call, i, op.prepare)
+        start = i % len(order) if rotate else 0
+        for k in order[start:] + order[:start]:
+            elapsed = timed(operations[k].call, i, operations[k].prepare)
             if i >= warmup:
-                row.samples_ms.append(elapsed)
+                rows[k].samples_ms.append(elapsed)
     return rows
 
 

@@ -1,6 +1,7 @@
 """``vgn-client``: talk to a grasp-planning service, or start one.
 
     vgn-client serve                      # run the service on 127.0.0.1:8000 (needs the [service] extra)
+    vgn-client serve --replicas 2         # two service processes behind HAProxy on the same ports
     vgn-client status                     # health, readiness and model of a running service
     vgn-client sessions                   # list live sessions
     vgn-client grasps SESSION --top 5     # best grasps of a session as a table
@@ -19,6 +20,7 @@ import errno
 import importlib
 import json
 import os
+import signal
 import sys
 import tempfile
 import webbrowser
@@ -72,11 +74,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    serve = commands.add_parser("serve", help="run the service (uvicorn service.app:app)")
+    serve = commands.add_parser(
+        "serve",
+        help="run the service (uvicorn service.app:app), or a fleet of replicas behind HAProxy",
+        description="Run the service. With --replicas N, run N service processes on loopback ports of their "
+        "own behind HAProxy, which listens on --host/--port (HTTP) and --grpc-port and routes each session to "
+        "one replica (docs/fleet.md); a replica that dies is started again. Ctrl-C or SIGTERM stops them all.",
+    )
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--model", help="weights file (sets VGN_MODEL)")
     serve.add_argument("--grpc-port", type=int, help="gRPC port (sets VGN_GRPC_PORT; default 50051, 0: off)")
+    serve.add_argument(
+        "--replicas", type=int, help="run this many service processes behind HAProxy (needs haproxy)"
+    )
 
     status = commands.add_parser("status", help="health, readiness and model of a service")
     _add_connection(status)
@@ -244,6 +255,8 @@ def _serve(args: argparse.Namespace) -> int:
     except ImportError:
         print("serving needs the service extra: pip install 'vgn-service[service]'", file=sys.stderr)
         return 2
+    if args.replicas is not None:
+        return _serve_fleet(args)
     if args.model:
         os.environ["VGN_MODEL"] = args.model
     if args.grpc_port is not None:
@@ -262,6 +275,36 @@ def _serve(args: argparse.Namespace) -> int:
     grpc = f"gRPC on grpc://{grpc_host}:{grpc_port}" if grpc_port != "0" else "gRPC off"
     print(f"serving HTTP on http://{args.host}:{args.port}, {grpc}", file=sys.stderr)
     uvicorn.run("service.app:app", host=args.host, port=args.port)
+    return 0
+
+
+def _serve_fleet(args: argparse.Namespace) -> int:
+    """``serve --replicas N``: the fleet runs until Ctrl-C or SIGTERM, then stops as a whole."""
+    from client.fleet import Fleet, FleetConfig, FleetError
+
+    grpc_port = 50051 if args.grpc_port is None else args.grpc_port
+    config = FleetConfig(args.replicas, args.host, args.port, grpc_port or None, args.model)
+    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(0))  # unwinds through stop() below
+    fleet = None
+    try:
+        fleet = Fleet(config)
+        print(f"starting {args.replicas} replicas and HAProxy ...", file=sys.stderr)
+        fleet.start()
+        grpc = f", gRPC on {fleet.grpc_url}" if fleet.grpc_url else ", gRPC off"
+        print(
+            f"serving HTTP on {fleet.url}{grpc} through HAProxy, {args.replicas} replicas:", file=sys.stderr
+        )
+        for replica in fleet.replicas:
+            print(f"  {replica.url}  {replica.grpc_url}  (pid {replica.pid})", file=sys.stderr)
+        fleet.watch()
+    except FleetError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if fleet is not None:
+            fleet.stop()
     return 0
 
 

@@ -10,6 +10,7 @@ import logging
 from typing import TYPE_CHECKING
 
 from client.http import VGNClient
+from client.recovery import DEFAULT_REPLAY, Replay
 
 if TYPE_CHECKING:
     from client.grpc_client import GRPCClient
@@ -24,15 +25,18 @@ def is_grpc_url(url: str) -> bool:
     return url.lower().startswith(GRPC_SCHEMES)
 
 
-def connect(url: str, api_key: str | None = None, timeout: float = 30.0) -> VGNClient | GRPCClient:
-    """A client for ``url``; both kinds have the same methods and return types."""
+def connect(
+    url: str, api_key: str | None = None, timeout: float = 30.0, replay: Replay | None = DEFAULT_REPLAY
+) -> VGNClient | GRPCClient:
+    """A client for ``url``; both kinds have the same methods and return types (``replay``:
+    what each keeps to rebuild a session lost with its replica, ``client.recovery``)."""
     log.debug("connecting to %s over %s", url, "gRPC" if is_grpc_url(url) else "HTTP")
     if not is_grpc_url(url):
-        return VGNClient(url, api_key=api_key, timeout=timeout)
+        return VGNClient(url, api_key=api_key, timeout=timeout, replay=replay)
     try:
         from client.grpc_client import GRPCClient
     except ImportError as error:
         raise ImportError(
             f"grpc:// URLs need the grpc extra ({error}): pip install 'vgn-service[grpc]'"
         ) from None
-    return GRPCClient(url, api_key=api_key, timeout=timeout)
+    return GRPCClient(url, api_key=api_key, timeout=timeout, replay=replay)

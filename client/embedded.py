@@ -46,7 +46,7 @@ class EmbeddedService:
 
     ``env`` adds ``VGN_*`` settings (e.g. ``{"VGN_MODEL": path}``) to the child's environment;
     ``unset`` names variables of this process the child must not inherit.
-    With ``grpc=True`` the child also serves gRPC on another free port (``grpc_url``); without,
+    With ``grpc=True`` the child also serves gRPC on ``grpc_port`` or another free port (``grpc_url``); without,
     it serves none, so embedded services running side by side never contend for a port.
     """
 
@@ -60,10 +60,11 @@ class EmbeddedService:
         log_path: Path | None = None,
         unset: tuple[str, ...] = (),
         grpc: bool = False,
+        grpc_port: int | None = None,
     ) -> None:
         self.host, self.port = host, port or free_port(host)
         self.url = f"http://{host}:{self.port}"
-        self.grpc_port = free_port(host) if grpc else None
+        self.grpc_port = (grpc_port or free_port(host)) if grpc else None
         self.grpc_url = f"grpc://{host}:{self.grpc_port}" if grpc else None
         self._env = {name: value for name, value in os.environ.items() if name not in unset} | (env or {})
         self._env["VGN_GRPC_PORT"] = str(self.grpc_port or 0)
@@ -77,6 +78,12 @@ class EmbeddedService:
     def start(self) -> EmbeddedService:
         """Start the child and wait for ``/healthz``; a child that
         exits or never answers is stopped and reported with its log."""
+        self.launch()
+        self.wait_until_up()
+        return self
+
+    def launch(self) -> EmbeddedService:
+        """Start the child without waiting for it (several start side by side, then each is waited for)."""
         command = [
             sys.executable,
             "-m",
@@ -94,12 +101,21 @@ class EmbeddedService:
         self._log = open(self._log_path, "a+b") if self._log_path else tempfile.TemporaryFile()  # noqa: SIM115
         env = ending_with_this_process(self._env)
         self._process = subprocess.Popen(command, env=env, stdout=self._log, stderr=self._log)
+        return self
+
+    def wait_until_up(self) -> None:
+        """Wait for ``/healthz`` (the model is loaded by then); a child that exits or never
+        answers is stopped and reported with its log."""
         try:
             self._wait_until_up()
         except BaseException:
             self.stop()
             raise
-        return self
+
+    @property
+    def running(self) -> bool:
+        """Whether the child was started and has not exited."""
+        return self._process is not None and self._process.poll() is None
 
     @property
     def pid(self) -> int | None:

@@ -25,8 +25,10 @@ from grpc_health.v1 import health_pb2, health_pb2_grpc
 from client.grpc_api import convert
 from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
-from client.http import _ERROR_TYPES, VGNError, encode_depth, frame_meta, grasp_query
+from client.http import _ERROR_TYPES, VGNError, encode_depth, frame_meta, grasp_query, session_spec
+from client.recovery import DEFAULT_REPLAY, Rebuild, Replay, SessionJournal, is_lost
 from client.schemas import (
+    SESSION_ID_HEADER,
     FrameResult,
     GraspResult,
     Intrinsics,
@@ -41,6 +43,7 @@ from client.schemas import (
 T = TypeVar("T")
 DEFAULT_GRPC_URL = "grpc://127.0.0.1:50051"
 HTTP_STATUS_KEY = "vgn-http-status"
+SESSION_ENDED_KEY = "vgn-session-ended"
 #: The HTTP status of a gRPC code, when the service did not name one (transport-level errors).
 HTTP_STATUS_OF_CODE = {
     grpc.StatusCode.INVALID_ARGUMENT: 400,
@@ -51,6 +54,8 @@ HTTP_STATUS_OF_CODE = {
     grpc.StatusCode.UNAVAILABLE: 503,
 }
 CHANNEL_OPTIONS = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+#: Metadata key of the session id on every call about a session (gRPC keys are lower case).
+SESSION_ID_KEY = SESSION_ID_HEADER.lower()
 
 
 @dataclass(frozen=True)
@@ -83,17 +88,26 @@ def error_of(error: grpc.RpcError) -> Exception:
     if code == grpc.StatusCode.UNAVAILABLE and named is None:
         return ConnectionError(f"gRPC UNAVAILABLE: {detail}")
     status = int(named) if named else HTTP_STATUS_OF_CODE.get(code, 500)
-    result = _ERROR_TYPES.get(status, VGNError)(status, detail)
+    result = _ERROR_TYPES.get(status, VGNError)(status, detail, from_service=named is not None,
+                                                ended=trailing.get(SESSION_ENDED_KEY))  # fmt: skip
     result.args = (f"gRPC {code.name} (HTTP {status}): {detail}",)
     result.grpc_code = code  # type: ignore[attr-defined]
     return result
 
 
 class GRPCClient:
-    """Blocking gRPC client. Use as a context manager, or call ``close()``."""
+    """Blocking gRPC client. Use as a context manager, or call ``close()``.
+
+    Like ``VGNClient``, it sends the session id with every call about a session
+    (``x-session-id`` metadata) and rebuilds a session lost with its replica (``replay``).
+    """
 
     def __init__(
-        self, url: str = DEFAULT_GRPC_URL, api_key: str | None = None, timeout: float = 30.0
+        self,
+        url: str = DEFAULT_GRPC_URL,
+        api_key: str | None = None,
+        timeout: float = 30.0,
+        replay: Replay | None = DEFAULT_REPLAY,
     ) -> None:
         self.url = url.rstrip("/")
         target, tls = grpc_target(self.url)
@@ -107,13 +121,38 @@ class GRPCClient:
         self._health = health_pb2_grpc.HealthStub(self._channel)
         self._metadata = (("x-api-key", api_key),) if api_key else ()
         self.timeout = timeout
+        self._journal = SessionJournal(replay)
+        self._transport = _Transport(self)
 
-    def _call(self, method: Callable[..., Any], request: Any, parse: Callable[[Any], T]) -> T:
+    def _call(
+        self,
+        method: Callable[..., Any],
+        request: Any,
+        parse: Callable[[Any], T],
+        session_id: str | None = None,
+    ) -> T:
         try:
-            answer = method(request, timeout=self.timeout, metadata=self._metadata)
+            answer = method(request, timeout=self.timeout, metadata=self._routed(session_id))
         except grpc.RpcError as error:
             raise error_of(error) from None
         return parse(answer)
+
+    @property
+    def rebuilds(self) -> int:
+        """As ``VGNClient.rebuilds``."""
+        return self._journal.rebuilds
+
+    def _routed(self, session_id: str | None) -> tuple[tuple[str, str], ...]:
+        """The call's metadata: the API key, and the session id a proxy routes by."""
+        return self._metadata + (((SESSION_ID_KEY, session_id),) if session_id else ())
+
+    def _on_session(
+        self, session_id: str, method: Callable[..., Any], request: Any, parse: Callable[[Any], T]
+    ) -> T:
+        """A call about a session, rebuilding the session first if it was lost with its replica."""
+        return self._journal.call(
+            session_id, lambda: self._call(method, request, parse, session_id), self._transport
+        )
 
     # Service ------------------------------------------------------------------------------
     def health(self) -> dict:
@@ -157,13 +196,8 @@ class GRPCClient:
         decay: float | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
-        request = pb.CreateSessionRequest(
-            session_id=session_id,
-            workspace=convert.workspace_message(workspace or Workspace()),
-            intrinsics=convert.intrinsics_message(intrinsics),
-            decay=decay,
-        )
-        return self._call(self._stub.CreateSession, request, convert.session_info)
+        spec = session_spec(session_id, workspace, intrinsics, decay)
+        return self._journal.open(self._transport, Rebuild(spec, None, 0, []))
 
     def sessions(self) -> SessionList:
         """As ``VGNClient.sessions``."""
@@ -171,18 +205,35 @@ class GRPCClient:
 
     def session(self, session_id: str) -> SessionInfo:
         """As ``VGNClient.session``."""
-        return self._call(
-            self._stub.GetSession, pb.GetSessionRequest(session_id=session_id), convert.session_info
-        )
+        request = pb.GetSessionRequest(session_id=session_id)
+        return self._on_session(session_id, self._stub.GetSession, request, convert.session_info)
 
     def delete_session(self, session_id: str) -> None:
         """As ``VGNClient.delete_session``."""
-        self._call(self._stub.DeleteSession, pb.DeleteSessionRequest(session_id=session_id), lambda a: None)
+        kept = self._journal.forget(session_id)
+        request = pb.DeleteSessionRequest(session_id=session_id)
+        try:
+            self._call(self._stub.DeleteSession, request, lambda a: None, session_id)
+        except Exception as error:
+            if not (kept and is_lost(error)):
+                raise
 
     def reset_session(self, session_id: str) -> SessionInfo:
         """As ``VGNClient.reset_session``."""
         request = pb.ResetSessionRequest(session_id=session_id)
-        return self._call(self._stub.ResetSession, request, convert.session_info)
+        info = self._on_session(session_id, self._stub.ResetSession, request, convert.session_info)
+        self._journal.reset(session_id)
+        return info
+
+    def snapshot(self, session_id: str) -> bytes:
+        """Not over gRPC: snapshots are served by the HTTP front end (``VGNClient.snapshot``)."""
+        raise NotImplementedError("session snapshots are served over HTTP only: GET /sessions/{id}/snapshot")
+
+    def import_session(self, snapshot: bytes, session_id: str | None = None) -> SessionInfo:
+        """Not over gRPC: snapshots are imported by the HTTP front end (``VGNClient.import_session``)."""
+        raise NotImplementedError(
+            "session snapshots are imported over HTTP only: PUT /sessions/{id}/snapshot"
+        )
 
     # Frames -------------------------------------------------------------------------------
     def add_frame(
@@ -197,7 +248,9 @@ class GRPCClient:
         """Fuse a depth image: float (H, W) metres, uint16 PNG units, or PNG bytes;
         ``camera_pose`` camera→world (OpenCV optical frame)."""
         frame = frame_message(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth)
-        return self._call(self._stub.AddFrame, frame, convert.frame_result)
+        result = self._on_session(session_id, self._stub.AddFrame, frame, convert.frame_result)
+        self._journal.fused(session_id, frame, frame.ByteSize())
+        return result
 
     def stream_frames(
         self,
@@ -208,26 +261,32 @@ class GRPCClient:
         max_depth: float = 2.0,
     ) -> StreamResult:
         """Fuse many ``(depth, camera_pose)`` frames in one call; they are encoded as they are
-        sent, so ``frames`` may be a generator. The client's ``timeout`` covers the whole stream."""
-        local_errors: list[Exception] = []
+        sent, so ``frames`` may be a generator. The client's ``timeout`` covers the whole stream.
+        A stream cut by a lost replica is sent again from its first frame, after the session is
+        rebuilt, if its frames fit in the replay bounds."""
 
-        def messages() -> Iterator[pb.Frame]:
+        def build(depth: np.ndarray | bytes, pose: Pose | np.ndarray) -> pb.Frame:
+            return frame_message(session_id, depth, pose, intrinsics, depth_scale, max_depth)
+
+        stream = _Stream(iter(frames), build, self._journal.replay, lambda: self._journal.give_up(session_id))
+
+        def send() -> StreamResult:
             try:
-                for depth, pose in frames:
-                    yield frame_message(session_id, depth, pose, intrinsics, depth_scale, max_depth)
-            except Exception as error:  # gRPC would report it as a bare CANCELLED
-                local_errors.append(error)
-                raise
+                answer = self._stub.StreamFrames(
+                    stream.messages(), timeout=self.timeout, metadata=self._routed(session_id)
+                )
+            except grpc.RpcError as error:
+                if stream.local_errors:
+                    raise stream.local_errors[0] from None
+                raise error_of(error) from None
+            return StreamResult(
+                answer.session_id, answer.frames_received, answer.frame_count, answer.integration_ms
+            )
 
-        try:
-            answer = self._stub.StreamFrames(messages(), timeout=self.timeout, metadata=self._metadata)
-        except grpc.RpcError as error:
-            if local_errors:
-                raise local_errors[0] from None
-            raise error_of(error) from None
-        return StreamResult(
-            answer.session_id, answer.frames_received, answer.frame_count, answer.integration_ms
-        )
+        result = self._journal.call(session_id, send, self._transport)
+        for message in stream.sent:
+            self._journal.fused(session_id, message, message.ByteSize())
+        return result
 
     def track(
         self,
@@ -248,7 +307,8 @@ class GRPCClient:
 
         ``frames`` may be a generator that waits for the camera; the stream has no deadline (the
         client's ``timeout`` does not apply) and ends when ``frames`` does. Close the returned
-        iterator to cancel it early.
+        iterator to cancel it early. Frames fused by a stream are not kept for a rebuild: a stream
+        cut by a lost replica raises, and the caller resets the session and streams anew.
         """
         query = convert.grasp_query_message(session_id, grasp_query(options))
         local_errors: list[Exception] = []
@@ -270,7 +330,7 @@ class GRPCClient:
                 local_errors.append(error)
                 raise
 
-        updates = self._stub.Track(messages(), metadata=self._metadata)
+        updates = self._stub.Track(messages(), metadata=self._routed(session_id))
         try:
             for update in updates:
                 yield convert.grasp_result(update.result)
@@ -285,11 +345,12 @@ class GRPCClient:
     def grasps(self, session_id: str, **options: Any) -> GraspResult:
         """Ranked grasps; options are ``GraspQuery`` fields (threshold, max_grasps, planner, ...)."""
         request = convert.grasp_query_message(session_id, grasp_query(options))
-        return self._call(self._stub.GetGrasps, request, convert.grasp_result)
+        return self._on_session(session_id, self._stub.GetGrasps, request, convert.grasp_result)
 
     def tsdf(self, session_id: str) -> np.ndarray:
         """As ``VGNClient.tsdf``: the (N, N, N) float32 grid."""
-        return self._call(
+        return self._on_session(
+            session_id,
             self._stub.GetGrid,
             pb.GetGridRequest(session_id=session_id),
             lambda grid: convert.float_array(grid.data, tuple(grid.shape)),
@@ -297,7 +358,8 @@ class GRPCClient:
 
     def cloud(self, session_id: str) -> np.ndarray:
         """As ``VGNClient.cloud``: (M, 6) float32 points and normals."""
-        return self._call(
+        return self._on_session(
+            session_id,
             self._stub.GetCloud,
             pb.GetCloudRequest(session_id=session_id),
             lambda cloud: convert.float_array(cloud.data, (cloud.count, 6)),
@@ -312,6 +374,72 @@ class GRPCClient:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class _Transport:
+    """The calls that rebuild a lost session (``client.recovery``), over a ``GRPCClient``."""
+
+    def __init__(self, client: GRPCClient) -> None:
+        self._client = client
+
+    def open(self, plan: Rebuild) -> SessionInfo:
+        spec, stub = plan.spec, self._client._stub
+        request = pb.CreateSessionRequest(
+            session_id=spec.session_id,
+            workspace=convert.workspace_message(spec.workspace),
+            intrinsics=convert.intrinsics_message(spec.intrinsics),
+            decay=spec.decay,
+        )
+        return self._client._call(stub.CreateSession, request, convert.session_info, spec.session_id)
+
+    def delete(self, session_id: str) -> None:
+        request = pb.DeleteSessionRequest(session_id=session_id)
+        self._client._call(self._client._stub.DeleteSession, request, lambda a: None, session_id)
+
+    def replay(self, session_id: str, frame: pb.Frame) -> None:
+        self._client._call(self._client._stub.AddFrame, frame, lambda a: None, session_id)
+
+
+class _Stream:
+    """The frames of one ``StreamFrames`` call, encoded from the caller's iterable as they are
+    sent and kept within the replay bounds, so that a try cut by a lost replica can send them
+    again; past the bounds none are kept and ``give_up`` marks the session as not rebuildable."""
+
+    def __init__(
+        self,
+        source: Iterator[tuple[Any, Any]],
+        build: Callable[[Any, Any], pb.Frame],
+        replay: Replay | None,
+        give_up: Callable[[], None],
+    ) -> None:
+        self._source, self._build, self._replay, self._give_up = source, build, replay, give_up
+        self.sent: list[pb.Frame] = []  # every frame sent so far, while they are kept
+        self.kept = replay is not None
+        self._nbytes = 0
+        self.local_errors: list[Exception] = []
+
+    def messages(self) -> Iterator[pb.Frame]:
+        """The frames a try sent before (a retry), then the rest of the caller's."""
+        yield from list(self.sent)
+        try:
+            for depth, pose in self._source:
+                message = self._build(depth, pose)
+                self._keep(message)
+                yield message
+        except Exception as error:  # gRPC would report it as a bare CANCELLED
+            self.local_errors.append(error)
+            raise
+
+    def _keep(self, message: pb.Frame) -> None:
+        if not self.kept:
+            return
+        assert self._replay is not None
+        self._nbytes += message.ByteSize()
+        if len(self.sent) + 1 > self._replay.max_frames or self._nbytes > self._replay.max_bytes:
+            self.sent, self.kept = [], False
+            self._give_up()
+            return
+        self.sent.append(message)
 
 
 def frame_message(

@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Generic, TypeVar
 
@@ -22,7 +22,9 @@ import httpx
 import numpy as np
 from pydantic import ValidationError
 
+from client.recovery import DEFAULT_REPLAY, Rebuild, Replay, SessionJournal, is_lost, new_session_id
 from client.schemas import (
+    SESSION_ID_HEADER,
     FrameMeta,
     FrameResult,
     GraspQuery,
@@ -36,16 +38,28 @@ from client.schemas import (
     SessionList,
     Workspace,
 )
+from client.snapshot import MEDIA_TYPE as SNAPSHOT_MEDIA_TYPE
+from client.snapshot import meta_of
 
 T = TypeVar("T")
 DEFAULT_URL = "http://127.0.0.1:8000"
 
 
 class VGNError(Exception):
-    """The service answered with an error; ``status`` and ``detail`` say what and why."""
+    """The service answered with an error; ``status`` and ``detail`` say what and why.
+    ``from_service`` is False for an answer without the service's JSON body: a proxy's own
+    (a 502 or 503 while a replica is gone). ``ended`` says how a session this service held
+    ended ("deleted", "expired", "evicted"), for a 404 about one."""
 
-    def __init__(self, status: int, detail: Any, message: str | None = None) -> None:
-        self.status, self.detail = status, detail
+    def __init__(
+        self,
+        status: int,
+        detail: Any,
+        message: str | None = None,
+        from_service: bool = True,
+        ended: str | None = None,
+    ) -> None:
+        self.status, self.detail, self.from_service, self.ended = status, detail, from_service, ended
         super().__init__(f"HTTP {status}: {message or detail}")
 
 
@@ -126,10 +140,12 @@ def raise_for_error(response: httpx.Response) -> httpx.Response:
         return response
     try:
         body = response.json()
-        detail, message = body.get("detail", body), body.get("message")
+        detail, message, from_service = body.get("detail", body), body.get("message"), "detail" in body
+        ended = body.get("ended")
     except (ValueError, AttributeError):
-        detail, message = response.text, None
-    raise _ERROR_TYPES.get(response.status_code, VGNError)(response.status_code, detail, message)
+        detail, message, from_service, ended = response.text, None, False, None
+    kind = _ERROR_TYPES.get(response.status_code, VGNError)
+    raise kind(response.status_code, detail, message, from_service, ended)
 
 
 @dataclass
@@ -140,6 +156,11 @@ class Call(Generic[T]):
     path: str
     parse: Callable[[httpx.Response], T]
     kwargs: dict[str, Any] = field(default_factory=dict)
+
+    def routed(self, session_id: str) -> Call[T]:
+        """This call with the session's id in ``X-Session-Id``, which a proxy routes by."""
+        headers = {**self.kwargs.get("headers", {}), SESSION_ID_HEADER: session_id}
+        return Call(self.method, self.path, self.parse, {**self.kwargs, "headers": headers})
 
 
 def _model(kind: type[T]) -> Callable[[httpx.Response], T]:
@@ -213,16 +234,18 @@ class Calls:
     """Request builders for every endpoint; shared by the sync and async clients."""
 
     @staticmethod
-    def create_session(
-        session_id: str | None = None,
-        workspace: Workspace | None = None,
-        intrinsics: Intrinsics | None = None,
-        decay: float | None = None,
-    ) -> Call[SessionInfo]:
-        spec = SessionCreate(
-            session_id=session_id, workspace=workspace or Workspace(), intrinsics=intrinsics, decay=decay
-        )
-        return Call("POST", "/sessions", _model(SessionInfo), {"json": spec.model_dump(mode="json")})
+    def create_session(spec: SessionCreate) -> Call[SessionInfo]:
+        call = Call("POST", "/sessions", _model(SessionInfo), {"json": spec.model_dump(mode="json")})
+        return call.routed(spec.session_id) if spec.session_id else call
+
+    @staticmethod
+    def import_session(snapshot: bytes, session_id: str) -> Call[SessionInfo]:
+        kwargs = {"content": snapshot, "headers": {"Content-Type": SNAPSHOT_MEDIA_TYPE}}
+        return Call("PUT", f"/sessions/{session_id}/snapshot", _model(SessionInfo), kwargs).routed(session_id)
+
+    @staticmethod
+    def snapshot(session_id: str) -> Call[bytes]:
+        return Call("GET", f"/sessions/{session_id}/snapshot", lambda r: r.content).routed(session_id)
 
     @staticmethod
     def add_frame(
@@ -242,32 +265,103 @@ class Calls:
             f"/sessions/{session_id}/frames",
             _model(FrameResult),
             {"content": body, "headers": headers},
-        )
+        ).routed(session_id)
 
     @staticmethod
     def grasps(session_id: str, **options: Any) -> Call[GraspResult]:
         params = grasp_query(options).to_params()
-        return Call("GET", f"/sessions/{session_id}/grasps", _model(GraspResult), {"params": params})
+        return Call("GET", f"/sessions/{session_id}/grasps", _model(GraspResult), {"params": params}).routed(
+            session_id
+        )
 
     @staticmethod
     def view_page(session_id: str, refresh: float = 0.0, **options: Any) -> Call[str]:
         params = {**grasp_query(options).to_params(), "refresh": refresh, "standalone": "true"}
-        return Call("GET", f"/sessions/{session_id}/view", lambda r: r.text, {"params": params})
+        return Call("GET", f"/sessions/{session_id}/view", lambda r: r.text, {"params": params}).routed(
+            session_id
+        )
 
     @staticmethod
     def cloud(session_id: str) -> Call[np.ndarray]:
         return Call(
             "GET", f"/sessions/{session_id}/cloud", _npy, {"headers": {"Accept": "application/x-npy"}}
-        )
+        ).routed(session_id)
 
-    session = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}", _model(SessionInfo)))
+    session = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}", _model(SessionInfo)).routed(sid))
     sessions = staticmethod(lambda: Call("GET", "/sessions", _model(SessionList)))
-    delete_session = staticmethod(lambda sid: Call("DELETE", f"/sessions/{sid}", lambda r: None))
-    reset_session = staticmethod(lambda sid: Call("POST", f"/sessions/{sid}/reset", _model(SessionInfo)))
-    tsdf = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}/tsdf", _npy))
+    delete_session = staticmethod(lambda sid: Call("DELETE", f"/sessions/{sid}", lambda r: None).routed(sid))
+    reset_session = staticmethod(
+        lambda sid: Call("POST", f"/sessions/{sid}/reset", _model(SessionInfo)).routed(sid)
+    )
+    tsdf = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}/tsdf", _npy).routed(sid))
     model = staticmethod(lambda: Call("GET", "/model", _model(ModelInfo)))
     health = staticmethod(lambda: Call("GET", "/healthz", lambda r: r.json()))
     metrics = staticmethod(lambda: Call("GET", "/metrics", lambda r: r.text))
+
+
+def session_spec(
+    session_id: str | None,
+    workspace: Workspace | None,
+    intrinsics: Intrinsics | None,
+    decay: float | None = None,
+) -> SessionCreate:
+    """A session's creation request, checked; its id the one given or one this client picks."""
+    with refused_as("session", of_arguments=True):
+        return SessionCreate(
+            session_id=session_id or new_session_id(),
+            workspace=workspace or Workspace(),
+            intrinsics=intrinsics,
+            decay=decay,
+        )
+
+
+def import_plan(snapshot: bytes, session_id: str | None) -> Rebuild:
+    """What opens a session from ``snapshot`` (under ``session_id`` or the snapshot's own id)."""
+    with refused_as("snapshot"):
+        meta = meta_of(snapshot)
+    with refused_as("snapshot", of_arguments=True):
+        spec = SessionCreate(
+            session_id=session_id or meta.get("session_id"),
+            workspace=meta.get("workspace"),
+            intrinsics=meta.get("intrinsics"),
+        )
+    return Rebuild(spec, snapshot, int(meta.get("frame_count") or 0), [])
+
+
+class _Transport:
+    """The calls that rebuild a lost session (``client.recovery``), over this client's ``run``."""
+
+    def __init__(self, run: Callable[[Call[Any]], Any]) -> None:
+        self._run = run
+
+    def open(self, plan: Rebuild) -> SessionInfo:
+        if plan.snapshot is not None:
+            return self._run(Calls.import_session(plan.snapshot, plan.spec.session_id or ""))
+        return self._run(Calls.create_session(plan.spec))
+
+    def delete(self, session_id: str) -> None:
+        self._run(Calls.delete_session(session_id))
+
+    def replay(self, session_id: str, frame: Call[Any]) -> None:
+        self._run(frame)
+
+
+class _AsyncTransport:
+    """``_Transport`` for the asyncio client."""
+
+    def __init__(self, run: Callable[[Call[Any]], Awaitable[Any]]) -> None:
+        self._run = run
+
+    async def open(self, plan: Rebuild) -> SessionInfo:
+        if plan.snapshot is not None:
+            return await self._run(Calls.import_session(plan.snapshot, plan.spec.session_id or ""))
+        return await self._run(Calls.create_session(plan.spec))
+
+    async def delete(self, session_id: str) -> None:
+        await self._run(Calls.delete_session(session_id))
+
+    async def replay(self, session_id: str, frame: Call[Any]) -> None:
+        await self._run(frame)
 
 
 def _readiness(response: httpx.Response) -> Readiness:
@@ -282,7 +376,12 @@ def _headers(api_key: str | None) -> dict[str, str]:
 
 
 class VGNClient:
-    """Blocking client. Use as a context manager, or call ``close()``."""
+    """Blocking client. Use as a context manager, or call ``close()``.
+
+    Sessions it opens survive a lost replica behind a proxy: it keeps each session's frames
+    since its last reset, within ``replay``'s bounds, and rebuilds a session it finds gone
+    (``client.recovery``); ``replay=None`` keeps nothing and raises as the service answers.
+    """
 
     def __init__(
         self,
@@ -290,12 +389,24 @@ class VGNClient:
         api_key: str | None = None,
         timeout: float = 30.0,
         http: httpx.Client | None = None,
+        replay: Replay | None = DEFAULT_REPLAY,
     ) -> None:
         self.url = url.rstrip("/")
         self._http = http or httpx.Client(base_url=self.url, headers=_headers(api_key), timeout=timeout)
+        self._journal = SessionJournal(replay)
+        self._transport = _Transport(self._run)
 
     def _run(self, call: Call[T]) -> T:
         return call.parse(raise_for_error(self._http.request(call.method, call.path, **call.kwargs)))
+
+    @property
+    def rebuilds(self) -> int:
+        """Sessions this client rebuilt after finding them lost with their replica."""
+        return self._journal.rebuilds
+
+    def _on_session(self, session_id: str, call: Call[T]) -> T:
+        """``call``, rebuilding the session first if it was lost with its replica."""
+        return self._journal.call(session_id, lambda: self._run(call), self._transport)
 
     def health(self) -> dict:
         """The ``/healthz`` body: answers as soon as the process is up, model or not."""
@@ -315,23 +426,41 @@ class VGNClient:
 
     def session(self, session_id: str) -> SessionInfo:
         """A session's workspace, intrinsics and frame count; ``NotFound`` once it expired."""
-        return self._run(Calls.session(session_id))
+        return self._on_session(session_id, Calls.session(session_id))
 
     def delete_session(self, session_id: str) -> None:
-        """Drop a session and free its volume; ``NotFound`` if it is already gone."""
-        return self._run(Calls.delete_session(session_id))
+        """Drop a session and free its volume; ``NotFound`` if it is already gone (unless this
+        client opened it and it went with a lost replica: gone either way)."""
+        kept = self._journal.forget(session_id)
+        try:
+            self._run(Calls.delete_session(session_id))
+        except Exception as error:
+            if not (kept and is_lost(error)):
+                raise
 
     def reset_session(self, session_id: str) -> SessionInfo:
         """Empty a session's volume but keep its id and workspace, for a new scene."""
-        return self._run(Calls.reset_session(session_id))
+        info = self._on_session(session_id, Calls.reset_session(session_id))
+        self._journal.reset(session_id)
+        return info
 
     def tsdf(self, session_id: str) -> np.ndarray:
         """The fused (N, N, N) float32 grid the network reads, indexed [x, y, z] in the workspace frame."""
-        return self._run(Calls.tsdf(session_id))
+        return self._on_session(session_id, Calls.tsdf(session_id))
 
     def cloud(self, session_id: str) -> np.ndarray:
         """Surface points and outward normals, (M, 6) float32 in the world frame."""
-        return self._run(Calls.cloud(session_id))
+        return self._on_session(session_id, Calls.cloud(session_id))
+
+    def snapshot(self, session_id: str) -> bytes:
+        """The session as one compact file (settings, frame count, fused volumes; ``client.snapshot``),
+        for ``import_session`` here or on another service."""
+        return self._on_session(session_id, Calls.snapshot(session_id))
+
+    def import_session(self, snapshot: bytes, session_id: str | None = None) -> SessionInfo:
+        """Open a session from a ``snapshot()``, under its own id or ``session_id``; ``Conflict``
+        when the id is taken, ``BadRequest`` for a damaged file."""
+        return self._journal.open(self._transport, import_plan(snapshot, session_id))
 
     def ready(self) -> Readiness:
         """Readiness without raising on 503 (``ready`` is False then, with the reason)."""
@@ -344,9 +473,11 @@ class VGNClient:
         intrinsics: Intrinsics | None = None,
         decay: float | None = None,
     ) -> SessionInfo:
-        """Open a session; the service picks an id when none is given. With ``decay`` (0-1) the
-        session follows a changing scene: each frame first weighs earlier evidence by it."""
-        return self._run(Calls.create_session(session_id, workspace, intrinsics, decay))
+        """Open a session under ``session_id``, or under an id this client picks (a uuid4 hex);
+        ``Conflict`` when the id is taken. With ``decay`` (0-1) the session follows a changing
+        scene: each frame first weighs the evidence of earlier frames where it sees again by it."""
+        spec = session_spec(session_id, workspace, intrinsics, decay)
+        return self._journal.open(self._transport, Rebuild(spec, None, 0, []))
 
     def add_frame(
         self,
@@ -359,16 +490,19 @@ class VGNClient:
     ) -> FrameResult:
         """Fuse a depth image: float (H, W) metres, uint16 PNG units, or PNG bytes;
         ``camera_pose`` camera→world (OpenCV optical frame)."""
-        return self._run(Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth))
+        call = Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth)
+        result = self._on_session(session_id, call)
+        self._journal.fused(session_id, call, len(call.kwargs["content"]))
+        return result
 
     def grasps(self, session_id: str, **options: Any) -> GraspResult:
         """Ranked grasps; options are ``GraspQuery`` fields (threshold, max_grasps, ...)."""
-        return self._run(Calls.grasps(session_id, **options))
+        return self._on_session(session_id, Calls.grasps(session_id, **options))
 
     def view_page(self, session_id: str, refresh: float = 0.0, **options: Any) -> str:
         """The session viewer's self-contained HTML (3D surface, workspace and grasps); options are
         ``GraspQuery`` fields, ``refresh`` the seconds between its checks for new frames (0: a snapshot)."""
-        return self._run(Calls.view_page(session_id, refresh, **options))
+        return self._on_session(session_id, Calls.view_page(session_id, refresh, **options))
 
     def wait_until_up(self, timeout: float = 60.0) -> None:
         """Block until ``/healthz`` answers (for a service that is still starting)."""
@@ -394,7 +528,7 @@ class VGNClient:
 
 
 class AsyncVGNClient:
-    """Asyncio client with the same methods as ``VGNClient``, as coroutines."""
+    """Asyncio client with the same methods as ``VGNClient``, as coroutines (lost sessions included)."""
 
     def __init__(
         self,
@@ -402,12 +536,23 @@ class AsyncVGNClient:
         api_key: str | None = None,
         timeout: float = 30.0,
         http: httpx.AsyncClient | None = None,
+        replay: Replay | None = DEFAULT_REPLAY,
     ) -> None:
         self.url = url.rstrip("/")
         self._http = http or httpx.AsyncClient(base_url=self.url, headers=_headers(api_key), timeout=timeout)
+        self._journal = SessionJournal(replay)
+        self._transport = _AsyncTransport(self._run)
 
     async def _run(self, call: Call[T]) -> T:
         return call.parse(raise_for_error(await self._http.request(call.method, call.path, **call.kwargs)))
+
+    @property
+    def rebuilds(self) -> int:
+        """As ``VGNClient.rebuilds``."""
+        return self._journal.rebuilds
+
+    async def _on_session(self, session_id: str, call: Call[T]) -> T:
+        return await self._journal.acall(session_id, lambda: self._run(call), self._transport)
 
     async def health(self) -> dict:
         """As ``VGNClient.health``."""
@@ -427,23 +572,38 @@ class AsyncVGNClient:
 
     async def session(self, session_id: str) -> SessionInfo:
         """As ``VGNClient.session``."""
-        return await self._run(Calls.session(session_id))
+        return await self._on_session(session_id, Calls.session(session_id))
 
     async def delete_session(self, session_id: str) -> None:
         """As ``VGNClient.delete_session``."""
-        return await self._run(Calls.delete_session(session_id))
+        kept = self._journal.forget(session_id)
+        try:
+            await self._run(Calls.delete_session(session_id))
+        except Exception as error:
+            if not (kept and is_lost(error)):
+                raise
 
     async def reset_session(self, session_id: str) -> SessionInfo:
         """As ``VGNClient.reset_session``."""
-        return await self._run(Calls.reset_session(session_id))
+        info = await self._on_session(session_id, Calls.reset_session(session_id))
+        self._journal.reset(session_id)
+        return info
 
     async def tsdf(self, session_id: str) -> np.ndarray:
         """As ``VGNClient.tsdf``."""
-        return await self._run(Calls.tsdf(session_id))
+        return await self._on_session(session_id, Calls.tsdf(session_id))
 
     async def cloud(self, session_id: str) -> np.ndarray:
         """As ``VGNClient.cloud``."""
-        return await self._run(Calls.cloud(session_id))
+        return await self._on_session(session_id, Calls.cloud(session_id))
+
+    async def snapshot(self, session_id: str) -> bytes:
+        """As ``VGNClient.snapshot``."""
+        return await self._on_session(session_id, Calls.snapshot(session_id))
+
+    async def import_session(self, snapshot: bytes, session_id: str | None = None) -> SessionInfo:
+        """As ``VGNClient.import_session``."""
+        return await self._journal.aopen(self._transport, import_plan(snapshot, session_id))
 
     async def ready(self) -> Readiness:
         """As ``VGNClient.ready``: a 503 is an answer, not an error."""
@@ -457,7 +617,8 @@ class AsyncVGNClient:
         decay: float | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
-        return await self._run(Calls.create_session(session_id, workspace, intrinsics, decay))
+        spec = session_spec(session_id, workspace, intrinsics, decay)
+        return await self._journal.aopen(self._transport, Rebuild(spec, None, 0, []))
 
     async def add_frame(
         self,
@@ -469,17 +630,18 @@ class AsyncVGNClient:
         max_depth: float = 2.0,
     ) -> FrameResult:
         """As ``VGNClient.add_frame``."""
-        return await self._run(
-            Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth)
-        )
+        call = Calls.add_frame(session_id, depth, camera_pose, intrinsics, depth_scale, max_depth)
+        result = await self._on_session(session_id, call)
+        self._journal.fused(session_id, call, len(call.kwargs["content"]))
+        return result
 
     async def grasps(self, session_id: str, **options: Any) -> GraspResult:
         """As ``VGNClient.grasps``."""
-        return await self._run(Calls.grasps(session_id, **options))
+        return await self._on_session(session_id, Calls.grasps(session_id, **options))
 
     async def view_page(self, session_id: str, refresh: float = 0.0, **options: Any) -> str:
         """As ``VGNClient.view_page``."""
-        return await self._run(Calls.view_page(session_id, refresh, **options))
+        return await self._on_session(session_id, Calls.view_page(session_id, refresh, **options))
 
     async def aclose(self) -> None:
         """Close the connection pool (the async counterpart of ``close``)."""

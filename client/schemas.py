@@ -25,6 +25,10 @@ from client.geometry import (
 Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 Quaternion = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
 SESSION_ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+#: Carries the session id on every request about a session, its creation included, so that a
+#: proxy in front of several replicas routes all of a session's requests to one (docs/fleet.md).
+#: gRPC metadata keys are lower case: ``x-session-id``.
+SESSION_ID_HEADER = "X-Session-Id"
 MAX_IMAGE_SIDE = 8192
 #: Largest image area: every frame is decoded to float32 and buffered, so this bounds memory.
 MAX_IMAGE_PIXELS = 16_000_000
@@ -421,3 +425,8 @@ class ErrorResponse(BaseModel):
 
     detail: str | list[dict[str, Any]]
     message: str | None = Field(default=None, description="one-line summary of a 422's field errors")
+    ended: str | None = Field(
+        default=None,
+        description="a 404 for a session this service held: how it ended (deleted, expired, evicted); absent "
+        "for an id it never held, which behind a proxy means a session of a lost replica",
+    )

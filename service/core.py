@@ -35,6 +35,9 @@ from service.planner import (
 from service.runtime import configured_threads, runtime_report, tune_malloc
 from service.sessions import SessionStore
 from service.settings import Settings
+from service.snapshot import Snapshot
+from service.snapshot import decode as decode_snapshot
+from service.snapshot import encode as encode_snapshot
 
 CONVENTIONS = {
     "units": "metres, seconds; angles in query parameters in degrees",
@@ -84,6 +87,27 @@ class PlanningService:
     def create_session(self, spec: SessionCreate) -> SessionInfo:
         """Open a session (``SessionExists`` for a taken id, ``CapacityExceeded`` when every one is busy)."""
         return self.sessions.create(spec).info(self.sessions.ttl_s)
+
+    def export_session(self, session_id: str) -> bytes:
+        """A session's snapshot (``service.snapshot``): its settings, counts and volumes, the
+        frames still queued for its cloud fused first. The session stays as it was."""
+        with self.sessions.use(session_id) as session:
+            coarse, fine = session.volume.state()
+            state = Snapshot(session.session_id, session.workspace, session.intrinsics, session.frame_count,
+                             round(session.integration_ms, 3), coarse, fine, session.volume.decay)  # fmt: skip
+        return encode_snapshot(state)
+
+    def import_session(self, data: bytes, session_id: str | None = None) -> SessionInfo:
+        """Open a session from a snapshot, under its own id or ``session_id``; ``InvalidInput``
+        for a damaged or foreign file, ``SessionExists`` for a taken id."""
+        snapshot = decode_snapshot(data)
+        spec = SessionCreate.model_validate({
+            "session_id": session_id or snapshot.session_id,
+            "workspace": snapshot.workspace,
+            "intrinsics": snapshot.intrinsics,
+            "decay": snapshot.decay,
+        })  # fmt: skip
+        return self.sessions.create(spec, snapshot).info(self.sessions.ttl_s)
 
     def session_info(self, session_id: str) -> SessionInfo:
         """A session's state; ``SessionNotFound`` once it is gone or expired."""

@@ -16,7 +16,13 @@ class UnsupportedMediaType(ServiceError):
 
 
 class SessionNotFound(ServiceError):
-    """No session with that id, or it expired (HTTP 404)."""
+    """No session with that id, or it expired (HTTP 404). ``ended`` says how, when this service
+    held the session and it ended here ("deleted", "expired", "evicted"): a client then knows
+    the session is gone, not held by another replica it should rebuild it on."""
+
+    def __init__(self, message: str, ended: str | None = None) -> None:
+        super().__init__(message)
+        self.ended = ended
 
 
 class SessionExists(ServiceError):

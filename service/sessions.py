@@ -14,6 +14,7 @@ from typing import Any
 from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
 from service.cloud_fusion import CloudFusion, shared_fusion
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
+from service.snapshot import Snapshot
 from service.tsdf import SceneVolume
 
 
@@ -67,6 +68,17 @@ class Session:
         )
 
 
+#: What a request on an ended session is told, by how it ended.
+ENDED_MESSAGES = {
+    "deleted": "session {id!r} was deleted",
+    "expired": "session {id!r} expired after {ttl:g} s idle",
+    "evicted": "session {id!r} was evicted to make room for a new one (VGN_MAX_SESSIONS={limit})",
+    "closed": "session {id!r} ended with the service",
+}
+#: Ended sessions a store remembers, so that it can tell "ended here" from "never here".
+ENDED_KEPT = 4096
+
+
 class SessionStore:
     """Thread-safe registry of sessions with a TTL and a size limit.
 
@@ -90,11 +102,15 @@ class SessionStore:
         self.cloud_fusion = cloud_fusion or shared_fusion()
         self._clock = clock
         self._sessions: OrderedDict[str, Session] = OrderedDict()  # least recently used first
+        #: How recently ended sessions ended, by id, oldest first (``ENDED_KEPT`` at most).
+        self._ended: OrderedDict[str, str] = OrderedDict()
         self._lock = threading.Lock()
 
-    def create(self, spec: SessionCreate) -> Session:
+    def create(self, spec: SessionCreate, snapshot: Snapshot | None = None) -> Session:
         """Register a new session, dropping expired ones first and
-        evicting the least recently used idle one at the limit."""
+        evicting the least recently used idle one at the limit. With a ``snapshot`` (whose
+        settings ``spec`` carries) the session starts from its volumes and counts, never
+        visible half restored."""
         now = self._clock()
         workspace = spec.workspace
         volume = SceneVolume(
@@ -106,6 +122,8 @@ class SessionStore:
             self.cloud_fusion,
             spec.decay,
         )
+        if snapshot is not None:
+            volume.restore(snapshot.coarse, snapshot.fine)
         with self._lock:
             self._drop_expired(now)
             session_id = spec.session_id or uuid.uuid4().hex
@@ -113,7 +131,10 @@ class SessionStore:
                 raise SessionExists(f"session {session_id!r} already exists")
             if len(self._sessions) >= self.max_sessions:
                 self._evict_one()
+            self._ended.pop(session_id, None)
             session = Session(session_id, workspace, spec.intrinsics, volume, now, now)
+            if snapshot is not None:
+                session.frame_count, session.integration_ms = snapshot.frame_count, snapshot.integration_ms
             self._sessions[session_id] = session
             return session
 
@@ -149,7 +170,7 @@ class SessionStore:
         """Remove a live session now, even one in use; ``SessionNotFound`` if it is already gone."""
         with self._lock:
             self._live(session_id, self._clock())
-            self._remove(session_id)
+            self._remove(session_id, "deleted")
 
     def sweep(self) -> int:
         """Drop expired sessions; returns how many went."""
@@ -160,7 +181,7 @@ class SessionStore:
         """Drop every session and stop the cloud worker (the service shuts down)."""
         with self._lock:
             for session_id in list(self._sessions):
-                self._remove(session_id)
+                self._remove(session_id, "closed")
         self.cloud_fusion.close()
 
     def __len__(self) -> int:
@@ -170,10 +191,12 @@ class SessionStore:
     def _live(self, session_id: str, now: float) -> Session:
         session = self._sessions.get(session_id)
         if session is None:
-            raise SessionNotFound(f"session {session_id!r} does not exist (or it expired)")
+            ended = self._ended.get(session_id)
+            raise SessionNotFound(ENDED_MESSAGES.get(ended, "session {id!r} does not exist").format(
+                id=session_id, ttl=self.ttl_s, limit=self.max_sessions), ended)  # fmt: skip
         if self._expired(session, now):
-            self._remove(session_id)
-            raise SessionNotFound(f"session {session_id!r} expired after {self.ttl_s:g} s idle")
+            self._remove(session_id, "expired")
+            raise SessionNotFound(f"session {session_id!r} expired after {self.ttl_s:g} s idle", "expired")
         return session
 
     def _expired(self, session: Session, now: float) -> bool:
@@ -182,18 +205,22 @@ class SessionStore:
     def _drop_expired(self, now: float) -> int:
         expired = [sid for sid, s in self._sessions.items() if self._expired(s, now)]
         for session_id in expired:
-            self._remove(session_id)
+            self._remove(session_id, "expired")
         return len(expired)
 
-    def _remove(self, session_id: str) -> None:
-        """Forget a session and free the frames it queued for its cloud (a request still
-        holding it finishes on its own copy)."""
+    def _remove(self, session_id: str, how: str) -> None:
+        """Forget a session, remembering ``how`` it ended, and free the frames it queued for its
+        cloud (a request still holding it finishes on its own copy)."""
         self._sessions.pop(session_id).volume.close()
+        self._ended[session_id] = how
+        self._ended.move_to_end(session_id)
+        if len(self._ended) > ENDED_KEPT:
+            self._ended.popitem(last=False)
 
     def _evict_one(self) -> None:
         for session_id, session in self._sessions.items():  # least recently used first
             if session.users == 0:
-                self._remove(session_id)
+                self._remove(session_id, "evicted")
                 return
         raise CapacityExceeded(
             f"the session limit ({self.max_sessions}) is reached and every session is in use; "

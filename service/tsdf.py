@@ -133,6 +133,19 @@ class TSDFVolume:
         surface at sub-voxel precision, without normals (under 1 ms for 40³)."""
         return np.asarray(self._volume.extract_point_cloud().points, dtype=np.float64).reshape(-1, 3)
 
+    def state(self) -> np.ndarray:
+        """(N³, 2) float32 (tsdf, weight) per voxel, in Open3D's voxel order: everything fusion
+        keeps, so ``restore`` of it continues exactly where this volume stands (Open3D holds
+        float32, so nothing is lost)."""
+        return np.asarray(self._volume.extract_volume_tsdf(), dtype=np.float32)
+
+    def restore(self, state: np.ndarray) -> None:
+        """Overwrite every voxel with a ``state()`` of a volume of the same size and resolution."""
+        expected = (self.resolution**3, 2)
+        if state.shape != expected:
+            raise ValueError(f"a {self.resolution}³ volume's state has shape {expected}, got {state.shape}")
+        self._volume.inject_volume_tsdf(o3d.utility.Vector2dVector(state.astype(np.float64)))
+
 
 @dataclass(frozen=True)
 class QueuedFrame:
@@ -278,6 +291,29 @@ class SceneVolume:
         world_points = points @ rotation.T + translation
         world_normals = normals @ rotation.T
         return np.hstack([world_points, world_normals]).astype(np.float32)
+
+    def state(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The coarse volume's ``TSDFVolume.state()`` and the fine one's (None before any frame
+        reached it), the queued frames fused first so that the fine state holds every frame."""
+        with self._fusing:
+            while self._fuse_oldest():
+                pass
+            fine = None if self._fine is None else self._fine.state()
+        return self.coarse.state(), fine
+
+    def restore(self, coarse: np.ndarray, fine: np.ndarray | None) -> None:
+        """Start from a ``state()`` instead of empty volumes (a session moved between services);
+        the fine volume keeps the resolution it was saved at, a reset returns to this service's."""
+        volume = TSDFVolume(self._size, self._resolution)
+        volume.restore(coarse)
+        restored_fine = None
+        if fine is not None:
+            resolution = round(len(fine) ** (1 / 3))
+            restored_fine = TSDFVolume(self._size, resolution)
+            restored_fine.restore(fine)
+        with self._lock:
+            self._drop_pending()
+            self.coarse, self._fine = volume, restored_fine
 
     # For the worker (service.cloud_fusion.FusionQueue) -----------------------------------------
     def fusion_wanted(self) -> tuple[bool, bool]:

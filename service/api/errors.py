@@ -75,7 +75,10 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _service_error(_: Request, error: ServiceError) -> JSONResponse:
         status = next((code for kind, code in STATUS_OF.items() if isinstance(error, kind)), 400)
         headers = {"Retry-After": "5"} if isinstance(error, CapacityExceeded) else None
-        return JSONResponse(status_code=status, content={"detail": str(error)}, headers=headers)
+        content = {"detail": str(error)}
+        if isinstance(error, SessionNotFound) and error.ended:
+            content["ended"] = error.ended
+        return JSONResponse(status_code=status, content=content, headers=headers)
 
     @app.exception_handler(RequestValidationError)
     async def _request_validation(_: Request, error: RequestValidationError) -> JSONResponse:

@@ -7,7 +7,7 @@ import secrets
 from typing import Annotated
 
 import numpy as np
-from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response
+from fastapi import APIRouter, Depends, Header, HTTPException, Path, Query, Request, Response
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import ValidationError
@@ -15,6 +15,7 @@ from starlette.datastructures import FormData, UploadFile
 from starlette.formparsers import MultiPartException
 
 from client.schemas import (
+    SESSION_ID_PATTERN,
     ErrorResponse,
     FrameMeta,
     FrameResult,
@@ -27,6 +28,7 @@ from client.schemas import (
     SessionInfo,
     SessionList,
 )
+from client.snapshot import MEDIA_TYPE as SNAPSHOT_MEDIA_TYPE
 from service.api.errors import validation_response
 from service.api.metrics import ServiceMetrics
 from service.core import PlanningService
@@ -125,6 +127,22 @@ def create_session(service: Core, spec: SessionCreate | None = None) -> SessionI
     return service.create_session(spec or SessionCreate())
 
 
+SNAPSHOT_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            SNAPSHOT_MEDIA_TYPE: {
+                "schema": {
+                    "type": "string",
+                    "format": "binary",
+                    "description": "a snapshot from GET /sessions/{session_id}/snapshot",
+                }
+            }
+        },
+    }
+}
+
+
 @api.get("/sessions", response_model=SessionList)
 def list_sessions(service: Core) -> SessionList:
     """Every live session, and how many the service keeps at most."""
@@ -142,6 +160,42 @@ def delete_session(service: Core, session_id: str) -> Response:
     """Drop the session and free its volumes."""
     service.delete_session(session_id)
     return Response(status_code=204)
+
+
+@api.get(
+    "/sessions/{session_id}/snapshot",
+    response_class=Response,
+    responses={200: {"content": {SNAPSHOT_MEDIA_TYPE: {}}}},
+)
+def snapshot(service: Core, session_id: str) -> Response:
+    """The session as one compact file (`.npz`: settings, frame count, the fused volumes), for
+    `PUT /sessions/{session_id}/snapshot` on this or another service; the session stays as it was."""
+    return Response(service.export_session(session_id), media_type=SNAPSHOT_MEDIA_TYPE)
+
+
+@api.put(
+    "/sessions/{session_id}/snapshot",
+    status_code=201,
+    response_model=SessionInfo,
+    responses={409: {"model": ErrorResponse}},
+    openapi_extra=SNAPSHOT_BODY,
+)
+async def import_session(
+    service: Core,
+    session_id: Annotated[str, Path(pattern=SESSION_ID_PATTERN, description="id of the new session")],
+    request: Request,
+) -> SessionInfo:
+    """Open the session `session_id` from a snapshot (`GET /sessions/{id}/snapshot` of any
+    session): the same volumes, settings and frame count; 400 for a damaged or foreign file,
+    409 for a taken id (a snapshot never overwrites a session). Moves a session between
+    services (draining a replica)."""
+    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if media_type != SNAPSHOT_MEDIA_TYPE:
+        raise UnsupportedMediaType(
+            f"a snapshot is sent as {SNAPSHOT_MEDIA_TYPE}, got {media_type or 'no content type'!r}"
+        )
+    data = await request.body()
+    return await run_in_threadpool(service.import_session, data, session_id)
 
 
 @api.post("/sessions/{session_id}/reset", response_model=SessionInfo)

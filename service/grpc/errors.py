@@ -37,6 +37,8 @@ if TYPE_CHECKING:
 log = logging.getLogger("vgn.service")
 
 HTTP_STATUS_KEY = "vgn-http-status"
+#: Trailing metadata of a NOT_FOUND for a session that ended here (``SessionNotFound.ended``).
+SESSION_ENDED_KEY = "vgn-session-ended"
 API_KEY_MESSAGE = "missing or wrong API key (x-api-key or authorization: Bearer metadata)"
 
 CODE_OF: dict[type[ServiceError], grpc.StatusCode] = {
@@ -62,10 +64,17 @@ def validation_message(error: ValidationError) -> str:
     return field_errors(list(error.errors()))[1]
 
 
-def abort(context: grpc.ServicerContext, code: grpc.StatusCode, message: str, http_status: int) -> None:
-    """End the call with ``code`` and ``message``, naming in
-    the trailers the HTTP status the same failure gets."""
-    context.set_trailing_metadata(((HTTP_STATUS_KEY, str(http_status)),))
+def abort(
+    context: grpc.ServicerContext,
+    code: grpc.StatusCode,
+    message: str,
+    http_status: int,
+    ended: str | None = None,
+) -> None:
+    """End the call with ``code`` and ``message``, naming in the trailers the HTTP status the
+    same failure gets (and how a session that ended here ended)."""
+    trailers = ((HTTP_STATUS_KEY, str(http_status)),) + (((SESSION_ENDED_KEY, ended),) if ended else ())
+    context.set_trailing_metadata(trailers)
     context.abort(code, message)
 
 
@@ -80,8 +89,8 @@ def api_key_of(context: grpc.ServicerContext) -> str | None:
 
 
 F = TypeVar("F", bound=Callable[..., Any])
-#: (code, message, HTTP status) of a refused call.
-Failure = tuple[grpc.StatusCode, str, int]
+#: (code, message, HTTP status[, how the session ended]) of a refused call.
+Failure = tuple[grpc.StatusCode, str, int] | tuple[grpc.StatusCode, str, int, str | None]
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["GraspPlanning"].full_name
 
 
@@ -109,7 +118,7 @@ def failure_of(error: Exception, route: str) -> Failure:
     """The status a servicer's exception ends its call with (a bug is logged and INTERNAL)."""
     if isinstance(error, ServiceError):
         kind = next((k for k in CODE_OF if isinstance(error, k)), InvalidInput)
-        return CODE_OF[kind], str(error), HTTP_STATUS_OF.get(kind, 400)
+        return CODE_OF[kind], str(error), HTTP_STATUS_OF.get(kind, 400), getattr(error, "ended", None)
     if isinstance(error, ValidationError):
         return grpc.StatusCode.INVALID_ARGUMENT, validation_message(error), 422
     if isinstance(error, CheckpointError):

@@ -13,9 +13,11 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 import schemathesis
 from hypothesis import HealthCheck, Phase, seed, settings
+from hypothesis import strategies as st
 from hypothesis.errors import Flaky
 from schemathesis.checks import (
     allow_header_conformance,
@@ -33,13 +35,24 @@ from schemathesis.checks import (
 )
 from schemathesis.openapi.checks import RejectedPositiveData
 
+from client import snapshot
 from client.embedded import EmbeddedService
+from client.schemas import Workspace
+from service.snapshot import Snapshot, encode
 
 SEED = 20261123
 SHORT_EXAMPLES = 8
 SHORT_WORKFLOWS = 6
 SLOW_EXAMPLES = int(os.environ.get("VGN_FUZZ_EXAMPLES", "200"))
 FRAMES_OPERATION = "POST /sessions/{session_id}/frames"
+IMPORT_OPERATION = "PUT /sessions/{session_id}/snapshot"
+#: Snapshot bodies: an empty session's (valid), and bytes that are none.
+EMPTY_SNAPSHOT = encode(
+    Snapshot("fuzz", Workspace(resolution=16), None, 0, 0.0, np.zeros((16**3, 2), np.float32), None)
+)
+schemathesis.openapi.media_type(
+    snapshot.MEDIA_TYPE, st.sampled_from([EMPTY_SNAPSHOT, b"", b"PK\x03\x04 not a zip", EMPTY_SNAPSHOT[:100]])
+)
 #: The rules of the wire schemas that JSON Schema cannot state, each documented in the field's
 #: description, as their messages word them. A schema-valid request may be refused by these only.
 RULES_BEYOND_SCHEMA = (
@@ -60,7 +73,8 @@ def valid_but_beyond_schema(
     cannot state refuses them with a clear message: a custom rule of the wire schemas (unit
     quaternions, crop_min below crop_max, approach with max_approach_angle, a principal point
     inside the image: ``RULES_BEYOND_SCHEMA``) answers 422 whose every field error names one; a
-    frame whose depth bytes cannot be used (their size, encoding, or missing intrinsics) 400."""
+    frame whose depth bytes cannot be used (their size, encoding, or missing intrinsics) or bytes
+    that are not a snapshot 400."""
     try:
         positive_data_acceptance(ctx, response, case)
     except RejectedPositiveData:
@@ -79,7 +93,11 @@ def valid_but_beyond_schema(
             for e in field_errors
         ):
             return
-        if response.status_code == 400 and case.operation.label == FRAMES_OPERATION and detail:
+        if (
+            response.status_code == 400
+            and case.operation.label in (FRAMES_OPERATION, IMPORT_OPERATION)
+            and detail
+        ):
             return
         raise
 

@@ -216,3 +216,11 @@ def test_track_options_are_checked(service):
                     stub.Track(iter([pb.TrackRequest(frame=pb.Frame(session_id="x"), **options)]), timeout=30)
                 )
             assert raised.value.code() == grpc.StatusCode.INVALID_ARGUMENT
+
+
+def test_a_forgetting_session_keeps_its_decay_through_a_snapshot(service):
+    with VGNClient(service.url) as http:
+        session = http.create_session(intrinsics=INTRINSICS, decay=0.6).session_id
+        http.add_frame(session, BOX.depth(POSES[0]), POSES[0])
+        copy = http.import_session(http.snapshot(session), session_id=f"{session}-copy")
+        assert copy.decay == 0.6 and copy.frame_count == 1
