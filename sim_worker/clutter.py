@@ -301,7 +301,7 @@ class ClutterRemoval:
         images.save_attempt_image(
             self.image_dir,
             record.round_id,
-            record.attempts,
+            len(record.grasps),  # one picture per row, withdrawn approaches too
             grasp,
             rgb,
             self.views[0],

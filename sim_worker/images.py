@@ -121,7 +121,10 @@ def write_contact_sheet(image_dir: Path, record: RoundRecord) -> Path:
             continue
         with Image.open(path) as picture:
             tiles.append(picture.copy())
-        captions.append(f"#{attempt + 1}  q {float(row['score']):.2f}  {row.get('outcome', '')}")
+        notes = " ".join(str(row[key]) for key in ("disturbance", "loop") if row.get(key))
+        captions.append(
+            f"#{attempt + 1}  q {float(row['score']):.2f}  {row.get('outcome', '')}  {notes}".rstrip()
+        )
         successes.append(bool(int(row["label"])))
     title = (
         f"round {record.round_id} (scene {record.scene_id}): {record.cleared}/{record.object_count} objects "

@@ -32,7 +32,8 @@ from training.shards import quantize
 from vgn_data.files import atomic_writer
 
 #: Bump when rendering or fusing changes, so old caches stop matching.
-OBSERVATION_FORMAT = 1
+#: 2: objects drawn at their own scale under EGL (caches of format 1 drew some at another's).
+OBSERVATION_FORMAT = 2
 #: Depth-sensor models a fresh observation may carry (docs/sensors.md).
 SENSORS = ("dex", "structured-light")
 #: Single side views look from this far off vertical (degrees), as data generation's.
