@@ -55,6 +55,12 @@ GRASP_COLUMNS = [
 ]
 
 
+#: Columns that measure time: they differ between two runs of the same rounds, all else is equal.
+TIMING_COLUMNS = frozenset(
+    {"seconds", "integration_time", "planning_time", "client_planning_time", "trial_time", "first_grasp_ms"}
+)
+
+
 @dataclass
 class RoundRecord:
     """One clutter-removal round: its scene, how many objects it started with and cleared, its attempts and

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import torch
 
+from sim_worker.results import TIMING_COLUMNS
 from tests.helpers.datasets import make_dataset
 from tests.helpers.processes import wait_until_gone
 from vgn_data.files import CRASH_VARIABLE
@@ -183,7 +184,7 @@ def test_generate_data_killed_during_a_scene_leaves_no_orphans(reference_dataset
 # clear-scene --------------------------------------------------------------------------------
 
 #: Columns that hold wall-clock times, which no two runs share.
-TIMES = {"seconds", "integration_time", "planning_time", "client_planning_time", "trial_time"}
+TIMES = TIMING_COLUMNS
 
 
 def clear_scene(url: str, results: Path, rounds: int, crash_at: str | None = None):

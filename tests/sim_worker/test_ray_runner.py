@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from client.cli import main as cli_main
+from sim_worker.results import TIMING_COLUMNS
 from vgn_data.dataset import RawDataset
 
 ray = pytest.importorskip("ray")
@@ -140,7 +141,7 @@ def clear_scene(results: Path, *extra: str, url: str) -> subprocess.CompletedPro
 
 
 #: Columns that hold wall-clock times: they differ between any two runs.
-TIMING_COLUMNS = {"seconds", "integration_time", "planning_time", "client_planning_time", "trial_time"}
+TIMING_COLUMNS = TIMING_COLUMNS
 
 
 def rows_without_timings(path: Path) -> list[dict[str, str]]:
