@@ -31,7 +31,7 @@ from benchmarks.paper import PAPER_GPD, PAPER_TABLE_1, SCENARIOS
 from benchmarks.report import this_machine
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES
 from sim_worker.clear_scene import resolve_planner, service_default, service_runtime
 from sim_worker.clutter import ClutterConfig, ClutterRemoval
 from sim_worker.metrics import FAILURE_CLASSES, summarize
@@ -85,6 +85,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "their results go to folders ending in -clearance",
     )
     parser.add_argument(
+        "--grip",
+        action=argparse.BooleanOptionalAction,
+        help="grasps whose closing fingers both meet the observed surface squarely, or not (default: the "
+        "service's, on unless its operator turned it off); checked rows are labelled PLANNER+grip and their "
+        "results go to folders ending in -grip",
+    )
+    parser.add_argument(
         "--turn-average",
         action=argparse.BooleanOptionalAction,
         help="VGN scores and orientations averaged over four quarter turns of the grid, or not (default: the "
@@ -128,16 +135,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def with_service_defaults(args: argparse.Namespace, runtime: dict | None) -> argparse.Namespace:
-    """``args`` with ``--clearance`` and ``--turn-average`` left out replaced by the service's
+    """``args`` with ``--clearance``, ``--grip`` and ``--turn-average`` left out replaced by the service's
     defaults: what its ``/model`` ``runtime`` reports or, with no service to ask (``--report``),
     what one started here would use (the ``VGN_*`` environment, else the settings' defaults).
     Folder names and row labels then say what the runs used."""
     if runtime is None:
         from service.settings import Settings
 
-        runtime = Settings().model_dump(include={"clearance", "turn_average"})
-    resolved = {switch: service_default(getattr(args, switch), runtime, switch)
-                for switch in ("clearance", "turn_average")}  # fmt: skip
+        runtime = Settings().model_dump(include=set(SWITCHES))
+    resolved = {switch: service_default(getattr(args, switch), runtime, switch) for switch in SWITCHES}
     return argparse.Namespace(**{**vars(args), **resolved})
 
 
@@ -150,7 +156,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
         scene=scene, objects=objects, object_count=int(count), rounds=args.rounds, seed=args.seed,
         threshold=args.threshold if planner == "vgn" else args.antipodal_threshold, selection=selection,
         planner=planner, renderer=args.renderer, noise=args.noise, views=args.views, clearance=args.clearance,
-        sensor=args.sensor, pose_error=args.pose_error,
+        grip=args.grip, sensor=args.sensor, pose_error=args.pose_error,
         turn_average=args.turn_average if planner == "vgn" else False,
         disturb=args.disturb, closed_loop=args.closed_loop, scan=args.scan,
     )  # fmt: skip
@@ -165,6 +171,7 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
                 suffix += (f"-{args.sensor}" if args.sensor else "") + ("-pose" if args.pose_error else "")
                 suffix += "-turns" if args.turn_average and planner == "vgn" else ""
                 suffix += "-clearance" if args.clearance else ""
+                suffix += "-grip" if args.grip else ""
                 suffix += (f"-disturb{args.disturb:g}" if args.disturb else "") + (
                     "-closed" if args.closed_loop else ""
                 )
@@ -174,9 +181,11 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
 
 def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
     """One line of the results table: the run's identity (VGN with turn averaging is ``vgn+turns``,
-    a planner with the clearance check ``PLANNER+clearance``), its threshold and model, and its summary."""
+    a planner with the clearance check ``PLANNER+clearance``, with the grip check ``PLANNER+grip``),
+    its threshold and model, and its summary."""
     planner += "+turns" if config.get("turn_average") else ""
     planner += "+clearance" if config.get("clearance") else ""
+    planner += "+grip" if config.get("grip") else ""
     return {"planner": planner, "selection": selection, "scenario": scenario,
             "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
 
@@ -255,7 +264,7 @@ def no_results(out: Path) -> int:
     print(
         f"no results for these options in {out}, table left as it was"
         + (f"; it holds {', '.join(held)} (a folder suffix -noise or -side needs that option; one without "
-           "-turns or -clearance needs --no-turn-average or --no-clearance, unless the defaults are off)"
+           "-turns, -clearance or -grip needs --no-turn-average, --no-clearance or --no-grip, unless the defaults are off)"
            if held else ""),
         file=sys.stderr,
     )  # fmt: skip

@@ -248,6 +248,7 @@ def headline_table(results: Path) -> str | None:
                 planners.append(row["planner"])
     if not cells:
         return None
+    planners.sort(key=lambda planner: planner.count("+"))  # plain first, then by the options added
     scenarios = sorted({s for s, _ in cells}, key=lambda s: (SCENARIO_ORDER.index(s.split(",")[0])
                        if s.split(",")[0] in SCENARIO_ORDER else 99, s))  # fmt: skip
     lines = [

@@ -45,10 +45,17 @@ CLEARANCE_HELP = (
 )
 
 
+GRIP_HELP = (
+    "drop grasps whose closing fingers would not both meet the observed surface squarely, or not "
+    "(default: the service's, on unless its operator turned it off)"
+)
+
+
 def _add_switches(parser: argparse.ArgumentParser, recorded: str = "") -> None:
-    """``--clearance/--no-clearance`` and ``--turn-average/--no-turn-average``; left out, each is
-    ``None``: the service's default, which is its best answer."""
+    """``--clearance/--no-clearance``, ``--grip/--no-grip`` and ``--turn-average/--no-turn-average``;
+    left out, each is ``None``: the service's default, which is its best answer."""
     parser.add_argument("--clearance", action=argparse.BooleanOptionalAction, help=CLEARANCE_HELP + recorded)
+    parser.add_argument("--grip", action=argparse.BooleanOptionalAction, help=GRIP_HELP + recorded)
     parser.add_argument(
         "--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP + recorded
     )
@@ -346,12 +353,14 @@ def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
         threshold=args.threshold,
         max_grasps=args.top,
         clearance=args.clearance,
+        grip=args.grip,
         turn_average=args.turn_average,
     )
     if args.json:
         print(result.model_dump_json(indent=2))
         return 0
     dropped = "" if result.clearance_dropped is None else f", {result.clearance_dropped} dropped by clearance"
+    dropped += "" if result.grip_dropped is None else f", {result.grip_dropped} dropped by grip"
     print(
         f"{len(result.grasps)} grasps in {result.planning_ms:.1f} ms (model {result.model}, "
         f"{result.frame_count} frames{dropped})"
@@ -376,6 +385,7 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
             "approach",
             "max_approach_angle",
             "clearance",
+            "grip",
             "turn_average",
         )
         if getattr(args, name) is not None

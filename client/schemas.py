@@ -40,7 +40,7 @@ VGN_DEFAULT_THRESHOLD = 0.9
 ANTIPODAL_DEFAULT_THRESHOLD = 0.5
 #: The grasp query's on/off options; unset, each is the service's default (on unless its operator
 #: turned it off), so a client that sets one sends it either way.
-SWITCHES = ("clearance", "turn_average")
+SWITCHES = ("clearance", "grip", "turn_average")
 
 
 class _Model(BaseModel):
@@ -288,6 +288,14 @@ class GraspQuery(_Model):
         "service's default (VGN_CLEARANCE, on unless the operator turned it off; /model runtime says); "
         "false gives the planner's unchecked grasps",
     )
+    grip: bool | None = Field(
+        default=None,
+        description="drop grasps whose closing fingers would not both meet the observed surface squarely: "
+        "from each pad, rays along the closing axis must reach the fused surface and meet normals within "
+        "on average within 60 degrees of the closing direction (service/grip.py); applies to both planners, before "
+        "max_grasps; about 1 ms. Unset: the service's default (VGN_GRIP, on unless the operator turned it "
+        "off; /model runtime says); false gives the planner's unchecked grasps",
+    )
     turn_average: bool | None = Field(
         default=None,
         description="vgn only: score each grasp by the network's quality averaged over the grid "
@@ -373,6 +381,10 @@ class GraspResult(_Model):
     clearance_dropped: int | None = Field(
         default=None, description="grasps the clearance check dropped; null when it did not run"
     )
+    grip_dropped: int | None = Field(
+        default=None,
+        description="grasps the grip check dropped (after the clearance check); null when it did not run",
+    )
     turn_average: bool | None = Field(
         default=None, description="vgn: whether the request was turn-averaged; null for antipodal"
     )
@@ -403,7 +415,7 @@ class ModelInfo(_Model):
         default=None,
         description="how the network runs: torch threads, OpenMP wait policy (and whether the service "
         "set it before torch loaded), inference form, precision, micro-batching window and counts, and "
-        "what a grasp request that does not say gets: turn_average and clearance",
+        "what a grasp request that does not say gets: turn_average, clearance and grip",
     )
 
 

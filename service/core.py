@@ -25,6 +25,7 @@ from service.clearance import clear_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
+from service.grip import gripping_grasps
 from service.planner import (
     NO_MODEL_MESSAGE,
     GraspPlanner,
@@ -194,7 +195,7 @@ class PlanningService:
     def plan(self, session_id: str, query: GraspQuery) -> GraspResult:
         """Ranked grasps (world frame, best first) on the session's fused volume, by VGN or,
         with ``planner="antipodal"``, by the geometric baseline on its cloud (no model needed).
-        Options the query leaves unset (turn averaging, the clearance check) take the operator's
+        Options the query leaves unset (turn averaging, the clearance and grip checks) take the operator's
         defaults, so a plain request gets the service's best answer."""
         self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
         baseline = query.planner == "antipodal"
@@ -202,16 +203,18 @@ class PlanningService:
         if not baseline and not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         clearance = self.settings.clearance if query.clearance is None else query.clearance
+        grip = self.settings.grip if query.grip is None else query.grip
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
             observed = session.volume.cloud() if baseline else session.volume.grid()
+            grid = (session.volume.grid() if baseline else observed) if grip else None
             surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             frame_count, integration_ms = session.frame_count, session.integration_ms
             revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
-        # With the clearance check, every grasp is checked and only then are max_grasps kept.
-        ranked = query.model_copy(update={"max_grasps": None}) if clearance else query
+        # With a check, every grasp is checked and only then are max_grasps kept.
+        ranked = query.model_copy(update={"max_grasps": None}) if clearance or grip else query
         if baseline:
             config = antipodal_config(ranked)
             grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
@@ -226,10 +229,14 @@ class PlanningService:
                 self._keep_output(session_id, key, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
-        dropped = None
+        dropped = grip_dropped = None
         if surface is not None:
             clear = clear_grasps(grasps, surface)
-            grasps, dropped = clear[: query.max_grasps], len(grasps) - len(clear)
+            grasps, dropped = clear, len(grasps) - len(clear)
+        if grid is not None:
+            gripping = gripping_grasps(grasps, grid, voxel_size, workspace_pose)
+            grasps, grip_dropped = gripping, len(grasps) - len(gripping)
+        grasps = grasps[: query.max_grasps]
         return GraspResult(
             grasps=grasps,
             planning_ms=round((time.perf_counter() - started) * 1e3, 3),
@@ -238,6 +245,7 @@ class PlanningService:
             model=model,
             threshold=threshold,
             clearance_dropped=dropped,
+            grip_dropped=grip_dropped,
             turn_average=turn_average,
         )
 
@@ -269,5 +277,6 @@ class PlanningService:
                 **self.planner.runtime(),
                 "turn_average": self.settings.turn_average,
                 "clearance": self.settings.clearance,
+                "grip": self.settings.grip,
             },
         )

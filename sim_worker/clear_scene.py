@@ -23,20 +23,26 @@ from sim_worker.results import ResultsFolder, RoundRecord
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     """``config`` with the planner's identity filled in: the weights' id (a resume with other
-    weights is refused), and the threshold, turn averaging and clearance check actually used
+    weights is refused), and the threshold, turn averaging, clearance and grip checks actually used
     when not given (the service's defaults), so that config.json records what was done."""
     model = vgn.model()
     runtime = model.runtime or {}
     clearance = service_default(config.clearance, runtime, "clearance")
+    grip = service_default(config.grip, runtime, "grip")
     if config.planner == "vgn":
         threshold = model.threshold if config.threshold is None else config.threshold
         turns = service_default(config.turn_average, runtime, "turn_average")
         return dataclasses.replace(
-            config, model=model.model_id, threshold=threshold, turn_average=turns, clearance=clearance
+            config,
+            model=model.model_id,
+            threshold=threshold,
+            turn_average=turns,
+            clearance=clearance,
+            grip=grip,
         )
     threshold = ANTIPODAL_DEFAULT_THRESHOLD if config.threshold is None else config.threshold
     return dataclasses.replace(
-        config, model="antipodal", threshold=threshold, turn_average=False, clearance=clearance
+        config, model="antipodal", threshold=threshold, turn_average=False, clearance=clearance, grip=grip
     )
 
 
@@ -70,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         planner=args.planner,
         renderer=args.renderer,
         clearance=getattr(args, "clearance", None),
+        grip=getattr(args, "grip", None),
         turn_average=getattr(args, "turn_average", None),
         disturb=getattr(args, "disturb", 0.0),
         closed_loop=getattr(args, "closed_loop", False),
@@ -116,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
         f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {config.model}"
         + (", turn averaging" if config.turn_average else "")
         + (", clearance check" if config.clearance else "")
+        + (", grip check" if config.grip else "")
     )
     print(summary_table(summary))
     print(f"results: {results_dir}/ (rounds.csv, grasps.csv, summary.json)")

@@ -67,10 +67,12 @@ class ClutterConfig:
     noise: bool = False
     renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
-    # Ask the service to drop grasps whose approach hits observed geometry, and VGN for outputs
-    # averaged over four quarter turns of the grid; None: the service's default for each
-    # (resolve_planner records what that was before a run starts).
+    # Ask the service to drop grasps whose approach hits observed geometry or whose fingers would
+    # not meet the surface squarely, and VGN for outputs averaged over four quarter turns of the
+    # grid; None: the service's default for each (resolve_planner records what that was before a
+    # run starts).
     clearance: bool | None = None
+    grip: bool | None = None
     turn_average: bool | None = None
     # A depth sensor's errors on every view (``noise`` is "dex"), and per-view camera pose error.
     sensor: Sensor | None = None
@@ -104,13 +106,13 @@ class ClutterConfig:
     def as_json(self) -> dict:
         """The settings as stored in the results folder's config.json, which a resume must match.
 
-        ``clearance``, ``turn_average``, ``sensor``, ``pose_error``, ``disturb`` and
+        ``clearance``, ``grip``, ``turn_average``, ``sensor``, ``pose_error``, ``disturb`` and
         ``closed_loop`` are recorded when on (``scan`` when not "fixed"); left out when off, so
         folders of runs from before these options still resume. Resolve the
-        first two first (``resolve_planner``): unresolved, the service's default is recorded as
+        first three first (``resolve_planner``): unresolved, the service's default is recorded as
         off whatever it is."""
         settings = asdict(self)
-        for switch in ("clearance", "turn_average", "sensor", "pose_error", "disturb", "closed_loop"):
+        for switch in ("clearance", "grip", "turn_average", "sensor", "pose_error", "disturb", "closed_loop"):
             if not settings[switch]:
                 del settings[switch]
         if settings["scan"] == "fixed":
@@ -266,7 +268,8 @@ class ClutterRemoval:
     def _query(self) -> dict:
         """The grasp request's options, as the run's settings give them."""
         return {"threshold": self.config.threshold, "planner": self.config.planner,
-                "clearance": self.config.clearance, "turn_average": self.config.turn_average}  # fmt: skip
+                "clearance": self.config.clearance, "grip": self.config.grip,
+                "turn_average": self.config.turn_average}  # fmt: skip
 
     def _reported_pose(self, pose: np.ndarray) -> np.ndarray:
         """Where the service is told the camera was: the true pose, or one with pose error."""

@@ -100,7 +100,8 @@ def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
     """A ``GraspQuery`` dict with vectors as 'x,y,z' text, so the HTTP rules apply; an unknown planner is
     passed on for the schema to refuse."""
     data = optional_fields(
-        message, ("threshold", "max_grasps", "nms_size", "max_approach_angle", "clearance", "turn_average")
+        message,
+        ("threshold", "max_grasps", "nms_size", "max_approach_angle", "clearance", "grip", "turn_average"),
     )
     data["planner"] = PLANNER_NAMES.get(message.planner, f"unknown planner {message.planner}")
     for name in ("crop_min", "crop_max", "approach"):
@@ -260,6 +261,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
         model=message.model,
         threshold=message.threshold,
         clearance_dropped=message.clearance_dropped if message.HasField("clearance_dropped") else None,
+        grip_dropped=message.grip_dropped if message.HasField("grip_dropped") else None,
         turn_average=message.turn_average if message.HasField("turn_average") else None,
     )
 

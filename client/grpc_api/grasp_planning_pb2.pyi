@@ -190,7 +190,7 @@ class StreamFramesResult(_message.Message):
     def __init__(self, session_id: _Optional[str] = ..., frames_received: _Optional[int] = ..., frame_count: _Optional[int] = ..., integration_ms: _Optional[float] = ...) -> None: ...
 
 class GraspQuery(_message.Message):
-    __slots__ = ("session_id", "planner", "threshold", "max_grasps", "nms_size", "crop_min", "crop_max", "approach", "max_approach_angle", "clearance", "turn_average")
+    __slots__ = ("session_id", "planner", "threshold", "max_grasps", "nms_size", "crop_min", "crop_max", "approach", "max_approach_angle", "clearance", "turn_average", "grip")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     PLANNER_FIELD_NUMBER: _ClassVar[int]
     THRESHOLD_FIELD_NUMBER: _ClassVar[int]
@@ -202,6 +202,7 @@ class GraspQuery(_message.Message):
     MAX_APPROACH_ANGLE_FIELD_NUMBER: _ClassVar[int]
     CLEARANCE_FIELD_NUMBER: _ClassVar[int]
     TURN_AVERAGE_FIELD_NUMBER: _ClassVar[int]
+    GRIP_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     planner: Planner
     threshold: float
@@ -213,7 +214,8 @@ class GraspQuery(_message.Message):
     max_approach_angle: float
     clearance: bool
     turn_average: bool
-    def __init__(self, session_id: _Optional[str] = ..., planner: _Optional[_Union[Planner, str]] = ..., threshold: _Optional[float] = ..., max_grasps: _Optional[int] = ..., nms_size: _Optional[int] = ..., crop_min: _Optional[_Union[Vector3, _Mapping]] = ..., crop_max: _Optional[_Union[Vector3, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., max_approach_angle: _Optional[float] = ..., clearance: _Optional[bool] = ..., turn_average: _Optional[bool] = ...) -> None: ...
+    grip: bool
+    def __init__(self, session_id: _Optional[str] = ..., planner: _Optional[_Union[Planner, str]] = ..., threshold: _Optional[float] = ..., max_grasps: _Optional[int] = ..., nms_size: _Optional[int] = ..., crop_min: _Optional[_Union[Vector3, _Mapping]] = ..., crop_max: _Optional[_Union[Vector3, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., max_approach_angle: _Optional[float] = ..., clearance: _Optional[bool] = ..., turn_average: _Optional[bool] = ..., grip: _Optional[bool] = ...) -> None: ...
 
 class Grasp(_message.Message):
     __slots__ = ("position", "orientation", "approach", "width", "quality", "track_id")
@@ -232,7 +234,7 @@ class Grasp(_message.Message):
     def __init__(self, position: _Optional[_Union[Vector3, _Mapping]] = ..., orientation: _Optional[_Union[Quaternion, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., width: _Optional[float] = ..., quality: _Optional[float] = ..., track_id: _Optional[int] = ...) -> None: ...
 
 class GraspResult(_message.Message):
-    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average")
+    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average", "grip_dropped")
     GRASPS_FIELD_NUMBER: _ClassVar[int]
     PLANNING_MS_FIELD_NUMBER: _ClassVar[int]
     INTEGRATION_MS_FIELD_NUMBER: _ClassVar[int]
@@ -241,6 +243,7 @@ class GraspResult(_message.Message):
     THRESHOLD_FIELD_NUMBER: _ClassVar[int]
     CLEARANCE_DROPPED_FIELD_NUMBER: _ClassVar[int]
     TURN_AVERAGE_FIELD_NUMBER: _ClassVar[int]
+    GRIP_DROPPED_FIELD_NUMBER: _ClassVar[int]
     grasps: _containers.RepeatedCompositeFieldContainer[Grasp]
     planning_ms: float
     integration_ms: float
@@ -249,7 +252,8 @@ class GraspResult(_message.Message):
     threshold: float
     clearance_dropped: int
     turn_average: bool
-    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ...) -> None: ...
+    grip_dropped: int
+    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ..., grip_dropped: _Optional[int] = ...) -> None: ...
 
 class GetGridRequest(_message.Message):
     __slots__ = ("session_id",)

@@ -1,4 +1,4 @@
-"""``--clearance/--no-clearance`` and ``--turn-average/--no-turn-average``: left out, the
+"""``--clearance/--no-clearance``, ``--grip/--no-grip`` and ``--turn-average/--no-turn-average``: left out, the
 request leaves the choice to the service's default (its best answer); given, it is sent either
 way, over HTTP and gRPC alike."""
 
@@ -21,7 +21,13 @@ CASES = [
     (("--no-clearance",), {"clearance": False}),
     (("--turn-average",), {"turn_average": True}),
     (("--no-turn-average",), {"turn_average": False}),
+    (("--grip",), {"grip": True}),
+    (("--no-grip",), {"grip": False}),
     (("--no-turn-average", "--no-clearance"), {"turn_average": False, "clearance": False}),
+    (
+        ("--no-turn-average", "--no-clearance", "--no-grip"),
+        {"turn_average": False, "clearance": False, "grip": False},
+    ),
 ]
 
 
@@ -58,7 +64,11 @@ def recorded(monkeypatch: pytest.MonkeyPatch) -> RecordingClient:
 
 def switches(options: dict[str, Any]) -> dict[str, bool]:
     """The switches a request's options set (``None`` is left to the service)."""
-    return {name: value for name in ("clearance", "turn_average") if (value := options.get(name)) is not None}
+    return {
+        name: value
+        for name in ("clearance", "grip", "turn_average")
+        if (value := options.get(name)) is not None
+    }
 
 
 @pytest.mark.parametrize(("flags", "expected"), CASES)
@@ -69,7 +79,7 @@ def test_the_flags_parse_to_the_choice_or_none(command: str, flags: tuple[str, .
     ]
     args = cli.build_parser().parse_args([*head, *flags])
     assert switches(vars(args)) == expected
-    for name in ("clearance", "turn_average"):
+    for name in ("clearance", "grip", "turn_average"):
         assert getattr(args, name) is expected.get(name), "left out: None, the service's default"
 
 
@@ -84,11 +94,11 @@ def test_grasps_and_view_pass_the_choice_on(
         assert switches(options) == expected
         query = GraspQuery(**options)
         params = query.to_params()
-        assert {k: v for k, v in params.items() if k in ("clearance", "turn_average")} == {
+        assert {k: v for k, v in params.items() if k in ("clearance", "grip", "turn_average")} == {
             k: "true" if v else "false" for k, v in expected.items()
         }, "sent on or off whenever given, never when left out"
         message = convert.grasp_query_message("s", query)
         assert {
-            k: getattr(message, k) for k in ("clearance", "turn_average") if message.HasField(k)
+            k: getattr(message, k) for k in ("clearance", "grip", "turn_average") if message.HasField(k)
         } == expected
         assert switches(GraspQuery(**convert.grasp_query_dict(message)).model_dump()) == expected

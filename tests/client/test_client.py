@@ -43,8 +43,8 @@ def test_grasps_are_typed_and_ranked(vgn):
     session = vgn.create_session(session_id="ranked", intrinsics=INTRINSICS)
     for pose in circle_views(3):
         vgn.add_frame(session.session_id, SCENE.depth(pose), pose)
-    # Without the clearance check: it drops every grasp of the random weights on this scene.
-    result = vgn.grasps(session.session_id, threshold=0.0, max_grasps=20, clearance=False)
+    # Without the clearance and grip checks: they drop every grasp of the random weights on this scene.
+    result = vgn.grasps(session.session_id, threshold=0.0, max_grasps=20, clearance=False, grip=False)
     assert result.frame_count == 3 and result.model and result.planning_ms > 0
     assert 0 < len(result.grasps) <= 20
     qualities = [g.quality for g in result.grasps]
@@ -104,7 +104,9 @@ async def test_async_client(server):
                 SCENE.depth(pose),
                 matrix_from_pose(pose[:3, 3], Pose.from_matrix(pose).orientation),
             )
-        result = await vgn.grasps(session.session_id, threshold=0.0, max_grasps=3, clearance=False)
+        result = await vgn.grasps(
+            session.session_id, threshold=0.0, max_grasps=3, clearance=False, grip=False
+        )
         assert result.frame_count == 2 and 1 <= len(result.grasps) <= 3
         assert (await vgn.tsdf(session.session_id)).any()
         await vgn.delete_session(session.session_id)

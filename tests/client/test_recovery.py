@@ -19,7 +19,7 @@ from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 VIEWS = circle_views(3)
 DEPTHS = [BoxScene().depth(pose) for pose in VIEWS]
-QUERY = {"threshold": 0.0, "max_grasps": 10, "clearance": False, "turn_average": False}
+QUERY = {"threshold": 0.0, "max_grasps": 10, "clearance": False, "grip": False, "turn_average": False}
 ENV = {"VGN_API_KEY": "", "VGN_TORCH_THREADS": "1"}
 
 

@@ -38,7 +38,7 @@ VIEWS = circle_views(6)
 #: Each view as the 16-bit PNG (millimetres) the clients send.
 FRAMES = [encode_depth(np.round(BoxScene().depth(pose) * 1000).astype(np.uint16))[0] for pose in VIEWS]
 #: Plain VGN grasps: the random test weights have every grasp dropped by the clearance check.
-QUERY = {"threshold": 0.0, "max_grasps": 10, "clearance": False, "turn_average": False}
+QUERY = {"threshold": 0.0, "max_grasps": 10, "clearance": False, "grip": False, "turn_average": False}
 ENV = {"VGN_API_KEY": "", "VGN_TORCH_THREADS": "1", "VGN_MAX_SESSIONS": "64"}
 
 

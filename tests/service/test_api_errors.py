@@ -527,9 +527,9 @@ def test_bad_grasp_query_is_422_naming_the_field(
 
 def test_valid_grasp_query_is_accepted(shared_http: TestClient, fused: str) -> None:
     """The refusals above are about the values, not the parameters themselves: a query with
-    every option answers with grasps that meet each of them. Without the clearance check: it
-    drops every grasp of the random weights on this scene."""
-    unchecked = {"threshold": 0.5, "clearance": "false"}
+    every option answers with grasps that meet each of them. Without the clearance and grip
+    checks: they drop every grasp of the random weights on this scene."""
+    unchecked = {"threshold": 0.5, "clearance": "false", "grip": "false"}
     unfiltered = shared_http.get(f"/sessions/{fused}/grasps", params=unchecked).json()["grasps"]
     assert unfiltered, "the fused box has grasps"
     approach = unfiltered[0]["approach"]

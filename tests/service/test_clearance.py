@@ -207,11 +207,12 @@ def fused_session(core: PlanningService, views: int = 6) -> str:
 
 
 def test_the_core_checks_every_grasp_before_max_grasps(trained):
+    """The clearance check alone (the grip check, also on by default, is tests/service/test_grip.py's)."""
     session = fused_session(trained)
-    everything = trained.plan(session, GraspQuery(threshold=0.0, clearance=False))
-    checked = trained.plan(session, GraspQuery(threshold=0.0, clearance=True))
+    everything = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=False))
+    checked = trained.plan(session, GraspQuery(threshold=0.0, clearance=True, grip=False))
     assert everything.clearance_dropped is None
-    default = trained.plan(session, GraspQuery(threshold=0.0))
+    default = trained.plan(session, GraspQuery(threshold=0.0, grip=False))
     assert (default.grasps, default.clearance_dropped) == (checked.grasps, checked.clearance_dropped), "on"
     assert 0 < len(checked.grasps) < len(everything.grasps)
     assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
@@ -219,14 +220,14 @@ def test_the_core_checks_every_grasp_before_max_grasps(trained):
     with trained.sessions.use(session) as s:
         surface = s.volume.surface_points()
     assert checked.grasps == clear_grasps(everything.grasps, surface)
-    first = trained.plan(session, GraspQuery(threshold=0.0, clearance=True, max_grasps=1))
+    first = trained.plan(session, GraspQuery(threshold=0.0, clearance=True, max_grasps=1, grip=False))
     assert first.grasps == checked.grasps[:1]  # the best clear grasp, not the best grasp if it collides
 
 
 def test_the_antipodal_planner_takes_the_option_too(trained):
     session = fused_session(trained, views=2)
-    everything = trained.plan(session, GraspQuery(planner="antipodal", clearance=False))
-    checked = trained.plan(session, GraspQuery(planner="antipodal", clearance=True))
+    everything = trained.plan(session, GraspQuery(planner="antipodal", clearance=False, grip=False))
+    checked = trained.plan(session, GraspQuery(planner="antipodal", clearance=True, grip=False))
     assert everything.clearance_dropped is None and checked.clearance_dropped is not None
     assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps
     assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
@@ -242,7 +243,12 @@ def test_the_option_over_http_and_grpc(trained):
             url = f"/sessions/{session}/grasps"
             answers = {
                 value: http.get(
-                    url, params={"threshold": 0.0, **({} if value is None else {"clearance": value})}
+                    url,
+                    params={
+                        "threshold": 0.0,
+                        "grip": "false",
+                        **({} if value is None else {"clearance": value}),
+                    },
                 )
                 for value in (None, "false", "true")
             }
@@ -254,14 +260,14 @@ def test_the_option_over_http_and_grpc(trained):
             assert on.clearance_dropped == len(plain.grasps) - len(on.grasps)
             assert (default.grasps, default.clearance_dropped) == (on.grasps, on.clearance_dropped)
             for clearance, expected in ((False, plain), (True, on), (None, on)):
-                over_grpc = rpc.grasps(session, threshold=0.0, clearance=clearance)
+                over_grpc = rpc.grasps(session, threshold=0.0, clearance=clearance, grip=False)
                 assert over_grpc.grasps == expected.grasps
                 assert over_grpc.clearance_dropped == expected.clearance_dropped
             bad = http.get(url, params={"clearance": "maybe"})
             assert bad.status_code == 422 and "clearance" in bad.json()["message"]
             # A bool cannot be invalid on the wire; an invalid request with the option set still is.
             with grpc.insecure_channel(f"127.0.0.1:{port}") as channel:
-                request = pb.GraspQuery(session_id=session, threshold=2.0, clearance=True)
+                request = pb.GraspQuery(session_id=session, threshold=2.0, clearance=True, grip=False)
                 with pytest.raises(grpc.RpcError) as caught:
                     GraspPlanningStub(channel).GetGrasps(request)
             assert caught.value.code() == grpc.StatusCode.INVALID_ARGUMENT

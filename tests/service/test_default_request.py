@@ -1,7 +1,7 @@
 """The default request is the service's best answer: a grasp request that does not say is
-turn-averaged and clearance-checked, ``turn_average=false&clearance=false`` is VGN's plain
-answer, and the operator's ``VGN_TURN_AVERAGE`` / ``VGN_CLEARANCE`` move the default; checked
-against real servers on loopback, over HTTP, gRPC and the CLI."""
+turn-averaged, clearance-checked and grip-checked, ``turn_average=false&clearance=false&grip=false``
+is VGN's plain answer, and the operator's ``VGN_TURN_AVERAGE`` / ``VGN_CLEARANCE`` / ``VGN_GRIP``
+move the default; checked against real servers on loopback, over HTTP, gRPC and the CLI."""
 
 from __future__ import annotations
 
@@ -22,10 +22,10 @@ from service.settings import PACKAGED_MODEL
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 SCENE = BoxScene()
-SWITCHES = ("VGN_TURN_AVERAGE", "VGN_CLEARANCE")
+SWITCHES = ("VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP")
 ENV = {"VGN_API_KEY": "", "VGN_TORCH_THREADS": "1"}
-PLAIN = {"turn_average": False, "clearance": False}
-BEST = {"turn_average": True, "clearance": True}
+PLAIN = {"turn_average": False, "clearance": False, "grip": False}
+BEST = {"turn_average": True, "clearance": True, "grip": True}
 
 
 def serve(**switches: str) -> EmbeddedService:
@@ -44,8 +44,8 @@ def default() -> Iterator[EmbeddedService]:
 
 @pytest.fixture(scope="module")
 def plain() -> Iterator[EmbeddedService]:
-    """A service whose operator turned both options off."""
-    with serve(VGN_TURN_AVERAGE="false", VGN_CLEARANCE="false") as running:
+    """A service whose operator turned every option off."""
+    with serve(VGN_TURN_AVERAGE="false", VGN_CLEARANCE="false", VGN_GRIP="false") as running:
         yield running
 
 
@@ -72,11 +72,11 @@ def bare_grpc_grasps(service: EmbeddedService, session: str) -> pb.GraspResult:
 
 def same_answer(a: GraspResult, b: GraspResult) -> bool:
     """Equal grasps, and the same account of what was done (timings apart)."""
-    keys = ("grasps", "threshold", "model", "turn_average", "clearance_dropped")
+    keys = ("grasps", "threshold", "model", "turn_average", "clearance_dropped", "grip_dropped")
     return all(getattr(a, key) == getattr(b, key) for key in keys)
 
 
-def test_a_request_that_does_not_say_is_turn_averaged_and_clearance_checked(default):
+def test_a_request_that_does_not_say_is_turn_averaged_and_clearance_and_grip_checked(default):
     session = fused_session(default)
     bare = httpx.get(f"{default.url}/sessions/{session}/grasps")  # no query parameters at all
     assert bare.status_code == 200, bare.text
@@ -84,24 +84,27 @@ def test_a_request_that_does_not_say_is_turn_averaged_and_clearance_checked(defa
     over_grpc = convert.grasp_result(bare_grpc_grasps(default, session))
     for result in (over_http, over_grpc):
         assert result.turn_average is True and result.clearance_dropped is not None
+        assert result.grip_dropped is not None
     assert same_answer(over_http, over_grpc)
     # As asked for explicitly, and the check did drop some of the averaged grasps here.
     for result, explicit in zip(answers(default, session), answers(default, session, **BEST), strict=True):
         assert result.grasps and result.clearance_dropped > 0
         assert same_answer(result, explicit)
-    unchecked = answers(default, session, clearance=False)[0]
-    assert unchecked.turn_average is True and unchecked.clearance_dropped is None
     kept = answers(default, session)[0].grasps
-    assert [g for g in unchecked.grasps if g in kept] == kept, "a subset, in the same order"
+    for switch in ("clearance", "grip"):
+        unchecked = answers(default, session, **{switch: False})[0]
+        assert unchecked.turn_average is True and getattr(unchecked, f"{switch}_dropped") is None
+        assert [g for g in unchecked.grasps if g in kept] == kept, "a subset, in the same order"
 
 
 def test_both_off_is_the_plain_answer_an_operator_default_off_gives(default, plain):
-    """``turn_average=false&clearance=false`` on a default service is what a service started with
-    ``VGN_TURN_AVERAGE=false VGN_CLEARANCE=false`` answers to a request that does not say; and
-    the other way round, both on there is the default here."""
+    """``turn_average=false&clearance=false&grip=false`` on a default service is what a service
+    started with ``VGN_TURN_AVERAGE=false VGN_CLEARANCE=false VGN_GRIP=false`` answers to a request
+    that does not say; and the other way round, all on there is the default here."""
     here, there = fused_session(default), fused_session(plain)
     for asked_off, plain_default in zip(answers(default, here, **PLAIN), answers(plain, there), strict=True):
         assert asked_off.grasps and asked_off.turn_average is False and asked_off.clearance_dropped is None
+        assert asked_off.grip_dropped is None
         assert same_answer(asked_off, plain_default)
     for best_default, asked_on in zip(answers(default, here), answers(plain, there, **BEST), strict=True):
         assert same_answer(best_default, asked_on)
@@ -111,7 +114,7 @@ def test_the_model_reports_the_defaults_the_operator_chose(default, plain):
     for service, expected in ((default, True), (plain, False)):
         with VGNClient(service.url) as http, GRPCClient(service.grpc_url) as rpc:
             for runtime in (http.model().runtime, rpc.model().runtime):
-                assert (runtime["turn_average"], runtime["clearance"]) == (expected, expected)
+                assert (runtime["turn_average"], runtime["clearance"], runtime["grip"]) == (expected,) * 3
 
 
 def test_the_cli_leaves_the_default_to_the_service_or_turns_either_off(default, capsys):
@@ -119,11 +122,12 @@ def test_the_cli_leaves_the_default_to_the_service_or_turns_either_off(default, 
 
     session = fused_session(default)
     results = {}
-    for options in ((), ("--no-turn-average", "--no-clearance"), ("--turn-average", "--clearance")):
+    for options in ((), ("--no-turn-average", "--no-clearance", "--no-grip"),
+                    ("--turn-average", "--clearance", "--grip")):  # fmt: skip
         assert main(["grasps", session, "--url", default.url, "--threshold", "0", *options, "--json"]) == 0
         results[options] = GraspResult.model_validate_json(capsys.readouterr().out)
     best, off, on = results.values()
-    assert best.turn_average is True and best.clearance_dropped is not None
+    assert best.turn_average is True and best.clearance_dropped is not None and best.grip_dropped is not None
     assert same_answer(best, on)
-    assert off.turn_average is False and off.clearance_dropped is None
+    assert off.turn_average is False and off.clearance_dropped is None and off.grip_dropped is None
     assert off.grasps == answers(default, session, **PLAIN)[0].grasps[:10]

@@ -83,11 +83,11 @@ def test_same_frames_give_identical_grasps_over_http_and_grpc(clients):
     fuse(rpc, over_grpc)
     np.testing.assert_array_equal(http.tsdf(over_http), rpc.tsdf(over_grpc))
     # Without the clearance check (it drops every grasp of the random weights here), then with it.
-    for options in ({"threshold": 0.0, "max_grasps": 30, "clearance": False},
+    for options in ({"threshold": 0.0, "max_grasps": 30, "clearance": False, "grip": False},
                     {"threshold": 0.0, "crop_min": "0.05,0.05,0.0", "crop_max": "0.25,0.25,0.3", "nms_size": 3,
-                     "clearance": False, "turn_average": False},
-                    {"threshold": 0.0, "approach": "0,0,-1", "max_approach_angle": 120.0, "clearance": False},
-                    {"planner": "antipodal", "max_grasps": 10, "clearance": False},
+                     "clearance": False, "grip": False, "turn_average": False},
+                    {"threshold": 0.0, "approach": "0,0,-1", "max_approach_angle": 120.0, "clearance": False, "grip": False},
+                    {"planner": "antipodal", "max_grasps": 10, "clearance": False, "grip": False},
                     {"threshold": 0.0}):  # fmt: skip
         a, b = http.grasps(over_http, **options), rpc.grasps(over_grpc, **options)
         assert a.grasps or options == {"threshold": 0.0}, options

@@ -18,11 +18,11 @@ def test_the_network_runs_again_only_when_the_volume_changed(core: PlanningServi
     for pose in views[:2]:
         core.add_frame(session, scene.depth(pose), pose)
     # Without the clearance check: it drops every grasp of the random weights on this scene.
-    query = GraspQuery(threshold=0.3, clearance=False)
+    query = GraspQuery(threshold=0.3, clearance=False, grip=False)
     start = forwards(core)
     first = core.plan(session, query)
     again = core.plan(session, query)
-    other_query = core.plan(session, GraspQuery(threshold=0.5, max_grasps=2, clearance=False))
+    other_query = core.plan(session, GraspQuery(threshold=0.5, max_grasps=2, clearance=False, grip=False))
     checked = core.plan(session, GraspQuery(threshold=0.3))
     assert forwards(core) == start + 1, "one forward for four requests on an unchanged volume"
     assert checked.clearance_dropped == len(first.grasps) - len(checked.grasps)

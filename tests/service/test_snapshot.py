@@ -69,7 +69,7 @@ def test_an_imported_session_carries_on_as_the_original(http):
         assert http.get(f"/sessions/original/{read}").content == http.get(f"/sessions/copy/{read}").content, (
             read
         )
-    query = {"threshold": 0.0, "clearance": "false", "max_grasps": 10}
+    query = {"threshold": 0.0, "clearance": "false", "grip": "false", "max_grasps": 10}
     assert (
         http.get("/sessions/original/grasps", params=query).json()["grasps"]
         == (http.get("/sessions/copy/grasps", params=query).json()["grasps"])

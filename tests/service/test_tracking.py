@@ -26,7 +26,7 @@ POSES = circle_views(6)
 BOX = BoxScene()
 MOVED = BoxScene(lower=(0.11, 0.02, TABLE_Z), upper=(0.19, 0.08, TABLE_Z + 0.06))  # 10 cm along -y
 #: Clearance off: the random test weights' grasps are not meant to be collision-free.
-QUERY = {"clearance": False, "threshold": 0.0, "max_grasps": 20}
+QUERY = {"clearance": False, "grip": False, "threshold": 0.0, "max_grasps": 20}
 
 
 def grasp(position, yaw_deg: float = 0.0, quality: float = 0.9) -> Grasp:
@@ -195,7 +195,7 @@ def test_a_bad_frame_ends_the_track_stream_naming_it(service):
         good = frame_message(session, BOX.depth(POSES[0]), POSES[0], None, 1000.0, 2.0)
         bad = pb.Frame(session_id=session, depth=b"\0" * 10, encoding=pb.DEPTH_ENCODING_RAW_FLOAT32,
                        camera_pose=good.camera_pose)  # fmt: skip
-        query = pb.GraspQuery(clearance=False)
+        query = pb.GraspQuery(clearance=False, grip=False)
         requests = [pb.TrackRequest(frame=good, query=query), pb.TrackRequest(frame=bad)]
         answers = stub.Track(iter(requests), timeout=30)
         first = next(answers)

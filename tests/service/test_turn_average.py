@@ -124,22 +124,24 @@ def test_a_kept_output_serves_only_requests_with_the_same_averaging(core: Planni
     scene = BoxScene()
     for pose in circle_views(3):
         core.add_frame(session, scene.depth(pose), pose)
-    # Without the clearance check: it drops every grasp of the random weights on this scene.
+    # Without the clearance and grip checks: they drop every grasp of the random weights on this scene.
     plain, averaged = (
-        GraspQuery(threshold=0.0, turn_average=False, clearance=False),
-        GraspQuery(threshold=0.0, turn_average=True, clearance=False),
+        GraspQuery(threshold=0.0, turn_average=False, clearance=False, grip=False),
+        GraspQuery(threshold=0.0, turn_average=True, clearance=False, grip=False),
     )
     first_plain = core.plan(session, plain).grasps
     first_averaged = core.plan(session, averaged).grasps
     assert first_averaged != first_plain
     assert core.plan(session, plain).grasps == first_plain
     assert core.plan(session, averaged).grasps == first_averaged
-    default = GraspQuery(threshold=0.0, clearance=False)
+    default = GraspQuery(threshold=0.0, clearance=False, grip=False)
     assert core.plan(session, default).grasps == first_averaged, "the default is on"
 
 
 def test_the_operator_chooses_the_default_and_requests_may_override_it(random_checkpoint):
-    settings = Settings(model=random_checkpoint, api_key=None, turn_average=False, clearance=False)
+    settings = Settings(
+        model=random_checkpoint, api_key=None, turn_average=False, clearance=False, grip=False
+    )
     core = PlanningService.from_settings(settings)
     try:
         session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
@@ -166,19 +168,30 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     scene = BoxScene()
     for pose in circle_views(3):
         vgn.add_frame(session, scene.depth(pose), pose)
-    # Without the clearance check: it drops every grasp of the random weights on this scene.
-    plain = vgn.grasps(session, threshold=0.0, turn_average=False, clearance=False)
-    averaged = vgn.grasps(session, threshold=0.0, turn_average=True, clearance=False)
+    # Without the clearance and grip checks: they drop every grasp of the random weights on this scene.
+    plain = vgn.grasps(session, threshold=0.0, turn_average=False, clearance=False, grip=False)
+    averaged = vgn.grasps(session, threshold=0.0, turn_average=True, clearance=False, grip=False)
     assert averaged.grasps and averaged.grasps != plain.grasps
     assert (plain.turn_average, averaged.turn_average) == (False, True)
-    default = vgn.grasps(session, threshold=0.0, clearance=False)
+    default = vgn.grasps(session, threshold=0.0, clearance=False, grip=False)
     assert default.grasps == averaged.grasps and default.turn_average is True, "on unless the operator says"
     assert vgn.model().runtime["turn_average"] is True
     bad = httpx.get(f"{vgn.url}/sessions/{session}/grasps", params={"turn_average": "maybe"})
     assert bad.status_code == 422 and "turn_average" in bad.json()["message"]
 
     for option, expected in (("--turn-average", averaged), ("--no-turn-average", plain)):
-        argv = ["grasps", session, "--url", vgn.url, "--threshold", "0", option, "--no-clearance", "--json"]
+        argv = [
+            "grasps",
+            session,
+            "--url",
+            vgn.url,
+            "--threshold",
+            "0",
+            option,
+            "--no-clearance",
+            "--no-grip",
+            "--json",
+        ]
         assert main(argv) == 0
         assert GraspResult.model_validate_json(capsys.readouterr().out).grasps == expected.grasps[:10]
 
@@ -189,7 +202,7 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     try:
         with GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
             for turn_average in (False, True, None):
-                options = {"threshold": 0.0, "turn_average": turn_average, "clearance": False}
+                options = {"threshold": 0.0, "turn_average": turn_average, "clearance": False, "grip": False}
                 expected = core.plan(local, GraspQuery(**options))
                 answer = rpc.grasps(local, **options)
                 assert answer.grasps == expected.grasps

@@ -25,7 +25,7 @@ from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 SCENE = BoxScene()
 #: Without the clearance check: it drops every grasp of the random weights on this scene.
-OPTIONS = {"threshold": 0.5, "max_grasps": 12, "clearance": "false"}
+OPTIONS = {"threshold": 0.5, "max_grasps": 12, "clearance": "false", "grip": "false"}
 
 
 def fuse(client, session_id: str, views: int = 6) -> None:
@@ -209,14 +209,25 @@ def test_cli_saves_the_viewer(server, vgn, tmp_path: Path, capsys) -> None:
     for pose in circle_views(2):
         vgn.add_frame(session, SCENE.depth(pose), pose)
     out = tmp_path / "view.html"
-    argv = ["view", session, "--url", server.url, "--out", str(out), "--threshold", "0.5", "--no-clearance"]
+    argv = [
+        "view",
+        session,
+        "--url",
+        server.url,
+        "--out",
+        str(out),
+        "--threshold",
+        "0.5",
+        "--no-clearance",
+        "--no-grip",
+    ]
     assert main(argv) == 0
     page = out.read_text(encoding="utf-8")
     assert "<script src" not in page, "a saved page opens offline"
     scene = json.loads(page.split('<script id="scene" type="application/json">')[1].split("</script>")[0])
     assert scene["session_id"] == session and scene["frame_count"] == 2 and scene["query"]["refresh"] == 0
     assert scene["grasps"] and scene["query"]["clearance"] is False
-    planned = vgn.grasps(session, threshold=0.5, max_grasps=20, clearance=False)
+    planned = vgn.grasps(session, threshold=0.5, max_grasps=20, clearance=False, grip=False)
     assert len(scene["grasps"]) == len(planned.grasps)
     assert main(["view", "nope", "--url", server.url, "--out", str(tmp_path / "x.html")]) == 1
     assert "404" in capsys.readouterr().err and not (tmp_path / "x.html").exists()

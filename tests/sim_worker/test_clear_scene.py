@@ -80,14 +80,14 @@ def test_wilson_interval_known_values():
     assert high == 100.0 and 69 < low < 73
 
 
-#: The clearance check drops every grasp of the random weights the test services load, so runs
-#: that must execute grasps turn it off.
-UNCHECKED = "--no-clearance"
+#: The clearance and grip checks drop every grasp of the random weights the test services load,
+#: so runs that must execute grasps turn them off.
+UNCHECKED = ("--no-clearance", "--no-grip")
 
 
 def test_short_run_through_a_real_service_and_resume(server, tmp_path: Path):
     results = tmp_path / "run"
-    common = ["--url", server.url, "--object-count", "3", "--threshold", "0.5", UNCHECKED,
+    common = ["--url", server.url, "--object-count", "3", "--threshold", "0.5", *UNCHECKED,
               "--results", str(results)]  # fmt: skip
     first = clear_scene(*common, "--rounds", "1")
     assert first.returncode == 0, first.stderr
@@ -104,7 +104,7 @@ def test_short_run_through_a_real_service_and_resume(server, tmp_path: Path):
 def test_embedded_service_run_with_images(random_checkpoint: Path, tmp_path: Path):
     results = tmp_path / "embedded"
     run = clear_scene("--model", str(random_checkpoint), "--rounds", "1", "--object-count", "2",
-                      "--threshold", "0.5", UNCHECKED, "--results", str(results), "--save-images")  # fmt: skip
+                      "--threshold", "0.5", *UNCHECKED, "--results", str(results), "--save-images")  # fmt: skip
     assert run.returncode == 0, run.stderr
     summary = check_results(results, 1)
     assert summary["attempts"] > 0
@@ -124,7 +124,7 @@ def test_without_a_model_the_run_explains_itself(tmp_path: Path, monkeypatch):
                                           ("packed", ["--views", "side", "--selection", "random"])])  # fmt: skip
 def test_longer_runs(server, tmp_path: Path, scene: str, extra: list[str]):
     results = tmp_path / scene
-    run = clear_scene("--url", server.url, "--scene", scene, "--rounds", "3", "--threshold", "0.5", UNCHECKED,
+    run = clear_scene("--url", server.url, "--scene", scene, "--rounds", "3", "--threshold", "0.5", *UNCHECKED,
                       "--results", str(results), *extra)  # fmt: skip
     assert run.returncode == 0, run.stderr
     check_results(results, 3)
@@ -144,12 +144,12 @@ def test_baseline_planner_needs_no_model(tmp_path: Path, monkeypatch):
 
 
 def test_benchmark_table_next_to_the_paper(tmp_path: Path):
-    """The plain planner (no clearance check), as the paper measures it, beside the paper's rows."""
+    """The plain planner (no clearance or grip check), as the paper measures it, beside the paper's rows."""
     from benchmarks.clutter import main
 
     out = tmp_path / "bench"
     assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
-                 "--renderer", "tiny", "--no-clearance", "--out", str(out)]) == 0  # fmt: skip
+                 "--renderer", "tiny", "--no-clearance", "--no-grip", "--out", str(out)]) == 0  # fmt: skip
     rows = json.loads((out / "table.json").read_text())
     assert [(r["planner"], r["scenario"], r["rounds"]) for r in rows] == [("antipodal", "blocks-5", 1)]
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
@@ -163,31 +163,37 @@ def test_benchmark_table_next_to_the_paper(tmp_path: Path):
     assert "87.6 / 90.1" in table and "88.6 / 39.4" in table, "the paper's Table 1 rows stand beside ours"
     assert (out / "antipodal-best-blocks-5" / "rounds.csv").exists()
     (out / "table.md").unlink()
-    assert main(["--report", "--no-clearance", "--out", str(out)]) == 0, "the table again, running nothing"
+    assert main(["--report", "--no-clearance", "--no-grip", "--out", str(out)]) == 0, (
+        "the table again, running nothing"
+    )
     assert "| antipodal | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
 
 
 @pytest.mark.parametrize(
     ("options", "averaged", "checked"),
     [
-        ((), True, True),
-        (("--no-turn-average", "--no-clearance"), False, False),
-        (("--no-clearance",), True, False),
+        ((), True, (True, True)),
+        (("--no-turn-average", "--no-clearance", "--no-grip"), False, (False, False)),
+        (("--no-clearance",), True, (False, True)),
+        (("--no-grip",), True, (True, False)),
     ],
 )
 def test_clear_scene_records_the_services_defaults_or_the_choice(
-    server, tmp_path: Path, options: tuple[str, ...], averaged: bool, checked: bool
+    server, tmp_path: Path, options: tuple[str, ...], averaged: bool, checked: tuple[bool, bool]
 ):
-    """Without an option the service's default applies (both on here) and is recorded as such;
-    an option turned off is left out of config.json, as in folders from before the options."""
+    """Without an option the service's default applies (all on here) and is recorded as such;
+    an option turned off is left out of config.json, as in folders from before the options.
+    ``checked``: (clearance, grip)."""
     results = tmp_path / "run"
     run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--threshold", "0.5",
                       *options, "--results", str(results))  # fmt: skip
     assert run.returncode == 0, run.stderr
     check_results(results, 1)
     config = json.loads((results / "config.json").read_text())
-    assert (config.get("turn_average", False), config.get("clearance", False)) == (averaged, checked)
-    assert ("turn averaging" in run.stdout, "clearance check" in run.stdout) == (averaged, checked)
+    recorded = (config.get("turn_average", False), config.get("clearance", False), config.get("grip", False))
+    assert recorded == (averaged, *checked)
+    said = ("turn averaging" in run.stdout, "clearance check" in run.stdout, "grip check" in run.stdout)
+    assert said == (averaged, *checked)
 
 
 class ServiceDefaults:
@@ -203,24 +209,29 @@ class ServiceDefaults:
 
 @pytest.mark.parametrize(
     ("runtime", "expected"),
-    [({"turn_average": True, "clearance": True}, (True, True)),
-     ({"turn_average": False, "clearance": False}, (False, False)),
-     ({"turn_average": True}, (True, False)),  # a service from before the clearance default
-     (None, (False, False))],
+    [({"turn_average": True, "clearance": True, "grip": True}, (True, True, True)),
+     ({"turn_average": False, "clearance": False, "grip": False}, (False, False, False)),
+     ({"turn_average": True, "clearance": True}, (True, True, False)),  # a service from before the grip check
+     ({"turn_average": True}, (True, False, False)),  # a service from before the clearance default
+     (None, (False, False, False))],
 )  # fmt: skip
-def test_the_planner_is_resolved_to_the_services_defaults(runtime: dict | None, expected: tuple[bool, bool]):
+def test_the_planner_is_resolved_to_the_services_defaults(
+    runtime: dict | None, expected: tuple[bool, bool, bool]
+):
     from sim_worker.clear_scene import resolve_planner
     from sim_worker.clutter import ClutterConfig
 
     vgn = ServiceDefaults(runtime)
     resolved = resolve_planner(ClutterConfig(), vgn)
-    assert (resolved.turn_average, resolved.clearance) == expected
+    assert (resolved.turn_average, resolved.clearance, resolved.grip) == expected
     assert (resolved.model, resolved.threshold) == ("m", 0.8)
     for choice in (True, False):  # a choice is kept whatever the default
-        chosen = resolve_planner(ClutterConfig(turn_average=choice, clearance=choice), vgn)
-        assert (chosen.turn_average, chosen.clearance) == (choice, choice)
+        chosen = resolve_planner(ClutterConfig(turn_average=choice, clearance=choice, grip=choice), vgn)
+        assert (chosen.turn_average, chosen.clearance, chosen.grip) == (choice, choice, choice)
     baseline = resolve_planner(ClutterConfig(planner="antipodal"), vgn)
-    assert (baseline.turn_average, baseline.clearance) == (False, expected[1]), "the check applies to it too"
+    assert (baseline.turn_average, baseline.clearance, baseline.grip) == (False, *expected[1:]), (
+        "checks apply too"
+    )
 
 
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
@@ -228,7 +239,11 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
     from benchmarks.clutter import combinations, parse_args, scenario_config, table_row, with_service_defaults
     from sim_worker.clutter import ClutterConfig
 
-    off = {"turn_average": False, "clearance": False}  # a service whose operator turned both off
+    off = {
+        "turn_average": False,
+        "clearance": False,
+        "grip": False,
+    }  # a service whose operator turned all off
     args = with_service_defaults(
         parse_args(["--planners", "vgn", "antipodal", "--selections", "random", "--scenarios", "pile-5",
                     "--turn-average", "--clearance", "--out", str(tmp_path)]),
@@ -249,50 +264,54 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
     )
     unsaid = parse_args(["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random"])
     assert (unsaid.turn_average, unsaid.clearance) == (None, None), "left to the service"
-    best = {"turn_average": True, "clearance": True}
+    best = {"turn_average": True, "clearance": True, "grip": True}
     for runtime, folder in (
         (off, "vgn-random-pile-5"),
-        (best, "vgn-random-pile-5-turns-clearance"),
+        (best, "vgn-random-pile-5-turns-clearance-grip"),
         ({}, "vgn-random-pile-5"),
     ):  # a service that reports no default applies none
         resolved = with_service_defaults(unsaid, runtime)
         assert [f.name for *_, f in combinations(resolved)] == [folder], runtime
         config = scenario_config(resolved, "vgn", "random", "pile-5")
-        assert (config.turn_average, config.clearance) == (runtime.get("turn_average", False),
-                                                           runtime.get("clearance", False))  # fmt: skip
+        assert (config.turn_average, config.clearance, config.grip) == (
+            runtime.get("turn_average", False), runtime.get("clearance", False), runtime.get("grip", False)
+        )  # fmt: skip
     chosen = with_service_defaults(
         parse_args(["--no-turn-average", "--clearance"]), best | {"clearance": False}
     )
     assert (chosen.turn_average, chosen.clearance) == (False, True), "a choice beats the default"
 
 
-def test_configs_without_the_clearance_check_keep_their_recorded_form():
-    """Off, the option is left out of config.json, so results folders from before it still resume."""
+def test_configs_without_the_checks_keep_their_recorded_form():
+    """Off, an option is left out of config.json, so results folders from before it still resume."""
     from sim_worker.clutter import ClutterConfig
 
-    assert "clearance" not in ClutterConfig().as_json()
+    assert "clearance" not in ClutterConfig().as_json() and "grip" not in ClutterConfig().as_json()
     assert ClutterConfig(clearance=True).as_json()["clearance"] is True
+    assert ClutterConfig(grip=True).as_json()["grip"] is True
 
 
 def test_benchmark_rows_with_the_clearance_check_are_labelled(tmp_path: Path, monkeypatch):
     """The benchmark follows the embedded service's default (the check on) and says so."""
     from benchmarks.clutter import main
 
-    for switch in ("VGN_CLEARANCE", "VGN_TURN_AVERAGE"):
+    for switch in ("VGN_CLEARANCE", "VGN_GRIP", "VGN_TURN_AVERAGE"):
         monkeypatch.delenv(switch, raising=False)
     out = tmp_path / "bench"
     assert main(["--planners", "antipodal", "--selections", "best", "--scenarios", "blocks-5", "--rounds", "1",
                  "--renderer", "tiny", "--out", str(out)]) == 0  # fmt: skip
     rows = json.loads((out / "table.json").read_text())
-    assert [(r["planner"], r["scenario"]) for r in rows] == [("antipodal+clearance", "blocks-5")]
-    assert "| antipodal+clearance | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
-    folder = out / "antipodal-best-blocks-5-clearance"
-    assert json.loads((folder / "config.json").read_text())["clearance"] is True
+    assert [(r["planner"], r["scenario"]) for r in rows] == [("antipodal+clearance+grip", "blocks-5")]
+    assert "| antipodal+clearance+grip | best | 0.5 | blocks-5 | 1 |" in (out / "table.md").read_text()
+    folder = out / "antipodal-best-blocks-5-clearance-grip"
+    config = json.loads((folder / "config.json").read_text())
+    assert config["clearance"] is True and config["grip"] is True
     assert main(["--report", "--out", str(out)]) == 0
-    assert "| antipodal+clearance |" in (out / "table.md").read_text()
-    # Without the check the report finds no run of its own kind: it says so and keeps the table.
+    assert "| antipodal+clearance+grip |" in (out / "table.md").read_text()
+    # Without a check the report finds no run of its own kind: it says so and keeps the table.
     assert main(["--report", "--no-clearance", "--out", str(out)]) == 1
-    assert "| antipodal+clearance |" in (out / "table.md").read_text()
+    assert main(["--report", "--no-grip", "--out", str(out)]) == 1
+    assert "| antipodal+clearance+grip |" in (out / "table.md").read_text()
     assert json.loads((out / "table.json").read_text()) == rows
 
 

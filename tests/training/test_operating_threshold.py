@@ -35,7 +35,7 @@ def test_the_cards_threshold_is_the_default_and_a_request_overrides_it(
             and model["card"]["matches_weights"]
         )
         session = open_fused_session(http)
-        plain = {"clearance": "false"}  # the random model's grasps would all hit the surface
+        plain = {"clearance": "false", "grip": "false"}  # the random model's grasps would all hit the surface
         default = http.get(f"/sessions/{session}/grasps", params=plain).json()
         explicit = http.get(f"/sessions/{session}/grasps", params={**plain, "threshold": 0.0}).json()
         assert default["threshold"] == 0.0 and default["grasps"], (

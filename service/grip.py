@@ -1,0 +1,161 @@
+"""Grip check: will the closing fingers meet the observed surface squarely, on both sides?
+
+VGN scores a grasp from the grid around it, and most of the grasps it is wrong about in
+clutter are not approach collisions (the clearance check catches those) but grasps that close
+on an edge, a corner or a slanted face and slip out while lifting. This check closes the hand
+on the fused surface itself: from each finger's pad, at the maximum opening, rays march along
+the closing axis (the grasp frame's y) towards the other finger until the TSDF crosses zero.
+Where a ray stops, the TSDF gradient there is the surface normal it meets; a pad meets the
+object squarely when that normal points back along the ray (a parallel-jaw grip holds by
+friction within a cone around the closing axis).
+
+Per grasp and finger this gives:
+
+- ``contact``: the share of the pad's rays that meet the surface before the fingers meet;
+- ``alignment``: the mean cosine between the met normals and the finger's closing direction.
+
+A grasp passes when, for *both* fingers, at least ``min_contact`` of the rays meet the surface
+and their mean alignment is at least ``min_alignment`` (:class:`GripConfig`). Rays march through
+the coarse grid the network reads (trilinear reads, one ``map_coordinates`` call for all
+grasps): about half a millisecond for the handful of grasps a pile scene keeps at the 0.8
+threshold, about 2 ms for 40, on a busy 2-core CPU.
+
+Frames and conventions (docs/conventions.md): grasp frame +z approach, y closing axis,
+origin midway between the finger bases; the pads' faces span z = 31.5-50 mm and x = ±10 mm
+(the ``franka-v2`` hand, as in ``service.clearance``). The grid holds (tsdf + 1) / 2 where
+observed, 0 elsewhere, its values at voxel centres ``(index + 0.5) * voxel_size``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import map_coordinates
+from scipy.spatial.transform import Rotation
+
+from client.schemas import Grasp
+from service.clearance import MAX_OPENING
+
+#: Where rays leave each pad, in the grasp frame: x across the pad, z along the approach (m).
+PAD_X = (-0.006, 0.0, 0.006)
+PAD_Z = (0.035, 0.041, 0.047)
+#: Ray step (m): a quarter of a default voxel.
+STEP = 0.002
+#: Grid value of the surface: (tsdf + 1) / 2 at tsdf = 0.
+SURFACE = 0.5
+
+
+@dataclass(frozen=True)
+class GripConfig:
+    """Knobs of the check: the least share of each pad's rays that must meet the surface
+    (``min_contact``) and the least mean cosine between the surface normals they meet and the
+    finger's closing direction (``min_alignment``).
+
+    Defaults chosen on simulated grasps on *training* objects (pile-5 scenes of VGN's pile
+    training objects, seed 11, every grasp of quality >= 0.5 at each step of 25 clutter-removal
+    rounds executed from the same state; 237 of them turn-averaged, clearance-checked and of
+    quality >= 0.8, 81 % of which succeeded): a mean alignment of 0.5 (60 degrees) dropped 28
+    that succeeded 43 % of the time and kept 209 that succeeded 86 %; 0.6 dropped 78 (69 %) for
+    87 %. Requiring contact on a third of the rays only drops grasps that meet nothing.
+    """
+
+    min_contact: float = 1.0 / 3.0
+    min_alignment: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.min_contact <= 1.0 and -1.0 <= self.min_alignment <= 1.0):
+            raise ValueError(f"invalid grip settings {self}")
+
+
+@dataclass(frozen=True)
+class GripMeasure:
+    """What the closing fingers meet, (G, 2) arrays with columns (+y finger, -y finger):
+    ``contact`` share of rays that met the surface, ``alignment`` their mean normal cosine
+    (0 where none met), ``reach`` (m) the mean closing distance to the surface from the open pad
+    (the open half-width where none met)."""
+
+    contact: np.ndarray
+    alignment: np.ndarray
+    reach: np.ndarray
+
+    def passes(self, config: GripConfig = GripConfig()) -> np.ndarray:
+        """(G,) bool: both fingers meet enough surface, squarely enough."""
+        return np.all((self.contact >= config.min_contact) & (self.alignment >= config.min_alignment), axis=1)
+
+
+def measure_grip(
+    grid: np.ndarray, voxel_size: float, positions: np.ndarray, orientations: np.ndarray
+) -> GripMeasure:
+    """Close the open hand of each grasp on the surface of ``grid``.
+
+    Args:
+        grid: (N, N, N) network input, indexed [x, y, z] in the workspace frame.
+        voxel_size: edge of one voxel (m).
+        positions: (G, 3) grasp origins, workspace frame (m).
+        orientations: (G, 4) quaternions [x, y, z, w], grasp frame → workspace frame.
+    """
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    count = len(positions)
+    if not count:
+        empty = np.zeros((0, 2))
+        return GripMeasure(empty, empty, empty)
+    rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
+    half_open = 0.5 * MAX_OPENING
+    steps = np.arange(0.0, half_open + 1e-9, STEP)  # closing distance from the open pad
+    pad_x, pad_z = (a.ravel() for a in np.meshgrid(PAD_X, PAD_Z, indexing="ij"))
+    sides = np.array([1.0, -1.0])
+    # Ray samples in the grasp frame: (side, ray, step, 3); y runs from ±half_open to 0.
+    local = np.zeros((2, len(pad_x), len(steps), 3))
+    local[..., 0] = pad_x[None, :, None]
+    local[..., 1] = sides[:, None, None] * (half_open - steps[None, None, :])
+    local[..., 2] = pad_z[None, :, None]
+    samples = positions[:, None, None, None, :] + np.einsum("gij,srkj->gsrki", rotations, local)
+    coordinates = samples.reshape(-1, 3).T / voxel_size - 0.5  # grid values sit at voxel centres
+    values = map_coordinates(grid, coordinates, order=1, mode="constant", cval=0.0)
+    values = values.reshape(count, 2, len(pad_x), len(steps))
+    # A ray meets the surface at its first step inside (value below the surface level) after
+    # free space; unobserved voxels (0) before any free space tell nothing and are skipped.
+    free_seen = np.maximum.accumulate(values >= SURFACE, axis=-1)
+    inside = (values < SURFACE) & free_seen
+    met = inside.any(axis=-1)
+    first = np.where(met, inside.argmax(axis=-1), len(steps) - 1)  # (G, 2, R)
+    hit_points = np.take_along_axis(samples, first[..., None, None], axis=3)[..., 0, :]  # (G, 2, R, 3)
+    normals = _surface_normals(grid, voxel_size, hit_points.reshape(-1, 3)).reshape(hit_points.shape)
+    # A pad meets the surface squarely when the normal there points back at the finger (+y side: +y).
+    closing_axis = rotations[:, :, 1]  # (G, 3) the grasp frame's y in the workspace frame
+    cosine = np.einsum("gsri,gi->gsr", normals, closing_axis) * sides[None, :, None]
+    contact = met.mean(axis=-1)
+    hits = np.maximum(met.sum(axis=-1), 1)
+    alignment = np.where(met, cosine, 0.0).sum(axis=-1) / hits
+    reach = np.where(met, steps[first], half_open).mean(axis=-1)
+    return GripMeasure(contact, alignment, reach)
+
+
+def _surface_normals(grid: np.ndarray, voxel_size: float, points: np.ndarray) -> np.ndarray:
+    """Unit gradients (M, 3) of ``grid`` at ``points`` (workspace frame): the outward surface
+    normal, since values grow towards free space. Central differences of trilinear reads."""
+    offsets = np.eye(3) * (0.5 * voxel_size)
+    reads = np.stack([points + offsets[a] * sign for a in range(3) for sign in (1.0, -1.0)])  # (6, M, 3)
+    coordinates = reads.reshape(-1, 3).T / voxel_size - 0.5
+    values = map_coordinates(grid, coordinates, order=1, mode="nearest").reshape(6, -1)
+    gradient = np.stack([values[2 * a] - values[2 * a + 1] for a in range(3)], axis=-1)
+    return gradient / np.maximum(np.linalg.norm(gradient, axis=-1, keepdims=True), 1e-12)
+
+
+def gripping_grasps(
+    grasps: list[Grasp],
+    grid: np.ndarray,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+    config: GripConfig = GripConfig(),
+) -> list[Grasp]:
+    """The ``grasps`` (world frame, order kept) whose fingers both meet the surface of ``grid``
+    squarely; ``workspace_pose`` (4×4) is the grid's corner in the world."""
+    if not grasps:
+        return []
+    to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
+    positions = np.array([g.position for g in grasps]) @ to_workspace[:3, :3].T + to_workspace[:3, 3]
+    turned = Rotation.from_matrix(to_workspace[:3, :3]) * Rotation.from_quat([g.orientation for g in grasps])
+    passes = measure_grip(grid, voxel_size, positions, turned.as_quat()).passes(config)
+    return [g for g, ok in zip(grasps, passes, strict=True) if ok]

@@ -1,0 +1,196 @@
+"""The grip check: fingers closing on grids of known geometry, the verdict in any workspace
+frame, and the ``grip`` grasp option in the planning core and over HTTP and gRPC."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from scipy.spatial.transform import Rotation
+
+from client.grpc_api import convert
+from client.grpc_client import GRPCClient
+from client.schemas import Grasp, GraspQuery, GraspResult, SessionCreate
+from service.app import create_app
+from service.core import PlanningService
+from service.grip import GripConfig, gripping_grasps, measure_grip
+from service.grpc.server import build_server
+from service.settings import PACKAGED_MODEL, Settings
+from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+
+N, SIZE = 40, 0.3
+VOXEL = SIZE / N
+TRUNCATION = 4 * VOXEL
+#: A grasp from straight above: approach -z (world), fingers closing along world y.
+FROM_ABOVE = Rotation.from_matrix([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+def grid_of(signed_distance: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The network input a perfect fusion of a surface gives: (tsdf + 1) / 2 within the
+    truncation band, 0 beyond it (far free space and deep inside alike), at voxel centres."""
+    centres = (np.stack(np.meshgrid(*[np.arange(N)] * 3, indexing="ij"), axis=-1) + 0.5) * VOXEL
+    tsdf = np.clip(signed_distance(centres) / TRUNCATION, -1.0, 1.0)
+    return np.where(np.abs(tsdf) < 0.98, (tsdf + 1.0) / 2.0, 0.0).astype(np.float32)
+
+
+def slab(thickness: float, tilt_deg: float, centre=(0.15, 0.15, 0.15)) -> Callable[[np.ndarray], np.ndarray]:
+    """A wall ``thickness`` thick whose faces are turned ``tilt_deg`` about x from facing ±y."""
+    tilt = np.radians(tilt_deg)
+    normal = np.array([0.0, np.cos(tilt), np.sin(tilt)])
+    return lambda p: np.abs((p - np.asarray(centre)) @ normal) - thickness / 2
+
+
+def box(lower, upper) -> Callable[[np.ndarray], np.ndarray]:
+    """An axis-aligned box: distance outside, negative depth inside."""
+    lower, upper = np.asarray(lower), np.asarray(upper)
+
+    def distance(p: np.ndarray) -> np.ndarray:
+        outside = np.linalg.norm(np.maximum(np.maximum(lower - p, p - upper), 0.0), axis=-1)
+        inside = np.minimum(np.min(p - lower, axis=-1), np.min(upper - p, axis=-1))
+        return np.where(inside > 0, -inside, outside)
+
+    return distance
+
+
+def grip_at(grid: np.ndarray, position, rotation: Rotation = FROM_ABOVE):
+    """The check's measure of one grasp whose pads sit at ``position`` + 4 cm along the approach."""
+    origin = np.asarray(position, dtype=float) - rotation.apply([0.0, 0.0, 0.041])
+    return measure_grip(grid, VOXEL, origin[None], rotation.as_quat()[None])
+
+
+def test_fingers_closing_on_square_faces_meet_them_squarely():
+    measure = grip_at(grid_of(slab(0.03, 0.0)), (0.15, 0.15, 0.15))
+    assert measure.contact.tolist() == [[1.0, 1.0]]
+    assert np.all(measure.alignment > 0.97)
+    # Each open pad is 4 cm out; the faces are 1.5 cm from the middle: 2.5 cm of closing.
+    assert np.allclose(measure.reach, 0.025, atol=0.003)
+    assert measure.passes().tolist() == [True]
+
+
+@pytest.mark.parametrize("tilt", [20.0, 45.0, 70.0])
+def test_alignment_is_the_cosine_of_the_faces_tilt(tilt):
+    measure = grip_at(grid_of(slab(0.03, tilt)), (0.15, 0.15, 0.15))
+    assert np.allclose(measure.alignment, np.cos(np.radians(tilt)), atol=0.05)
+    assert measure.passes().tolist() == [bool(np.cos(np.radians(tilt)) >= GripConfig().min_alignment)]
+
+
+def test_a_grasp_turned_across_the_faces_is_refused():
+    """Closing along the faces of a wall (the grasp turned 80° about its approach) meets them
+    at a grazing angle, if at all."""
+    turned = FROM_ABOVE * Rotation.from_euler("z", 80, degrees=True)
+    measure = grip_at(grid_of(slab(0.03, 0.0)), (0.15, 0.15, 0.15), turned)
+    assert not measure.passes()[0]
+
+
+def test_nothing_between_the_fingers_or_on_one_side_only_is_refused():
+    empty = grip_at(np.zeros((N, N, N), np.float32), (0.15, 0.15, 0.15))
+    assert empty.contact.tolist() == [[0.0, 0.0]] and not empty.passes()[0]
+    # An object only on the +y side of the grasp: the -y finger closes on nothing.
+    aside = grip_at(grid_of(box((0.10, 0.155, 0.10), (0.20, 0.18, 0.20))), (0.15, 0.15, 0.15))
+    assert aside.contact[0, 0] == 1.0 and aside.contact[0, 1] == 0.0
+    assert not aside.passes()[0]
+
+
+def test_the_thresholds_are_the_configs():
+    measure = grip_at(grid_of(slab(0.03, 45.0)), (0.15, 0.15, 0.15))
+    assert measure.passes(GripConfig(min_alignment=0.6)).tolist() == [True]
+    assert measure.passes(GripConfig(min_alignment=0.8)).tolist() == [False]
+    with pytest.raises(ValueError):
+        GripConfig(min_contact=1.5)
+    with pytest.raises(ValueError):
+        GripConfig(min_alignment=-2.0)
+
+
+def test_the_verdict_does_not_depend_on_the_workspace_frame():
+    """World-frame grasps on a workspace whose corner is moved and turned get the verdict the same
+    grasps get in the workspace frame."""
+    grid = grid_of(box((0.12, 0.135, 0.05), (0.18, 0.165, 0.11)))
+    rng = np.random.default_rng(3)
+    turns = Rotation.from_euler("z", rng.uniform(-0.6, 0.6, (40, 1))) * FROM_ABOVE
+    positions = np.array([0.15, 0.15, 0.121]) + rng.uniform(-0.02, 0.02, (40, 3))
+    local = measure_grip(grid, VOXEL, positions, turns.as_quat()).passes()
+    assert 0 < local.sum() < len(local), "the sample must hold both verdicts"
+    corner = np.eye(4)
+    corner[:3, :3] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
+    corner[:3, 3] = (0.4, -0.2, 0.7)
+    world = Rotation.from_matrix(corner[:3, :3])
+    grasps = [
+        Grasp(position=corner[:3, :3] @ p + corner[:3, 3], orientation=(world * r).as_quat(),
+              approach=(world * r).apply([0.0, 0.0, 1.0]), width=0.03, quality=0.9)
+        for p, r in zip(positions, turns, strict=True)
+    ]  # fmt: skip
+    kept = gripping_grasps(grasps, grid, VOXEL, corner)
+    assert kept == [g for g, ok in zip(grasps, local, strict=True) if ok]
+    assert gripping_grasps([], grid, VOXEL, corner) == []
+
+
+@pytest.fixture(scope="module")
+def trained() -> Iterator[PlanningService]:
+    service = PlanningService.from_settings(Settings(model=PACKAGED_MODEL, api_key=None, max_sessions=8))
+    yield service
+    service.close()
+
+
+def fused_session(core: PlanningService) -> str:
+    session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    for pose in circle_views():
+        core.add_frame(session, BoxScene().depth(pose), pose)
+    return session
+
+
+def test_the_core_checks_every_grasp_before_max_grasps(trained):
+    session = fused_session(trained)
+    everything = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=False))
+    checked = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True))
+    assert everything.grip_dropped is None
+    assert 0 < len(checked.grasps) < len(everything.grasps)
+    assert checked.grip_dropped == len(everything.grasps) - len(checked.grasps)
+    assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps  # a subset, same order
+    grid = trained.grid(session)
+    workspace = np.eye(4)
+    assert checked.grasps == gripping_grasps(everything.grasps, grid, VOXEL, workspace)
+    first = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True, max_grasps=1))
+    assert first.grasps == checked.grasps[:1]
+    both = trained.plan(session, GraspQuery(threshold=0.0))  # the default: both checks
+    assert both.clearance_dropped is not None and both.grip_dropped is not None
+    assert both.grasps == gripping_grasps(
+        trained.plan(session, GraspQuery(threshold=0.0, grip=False)).grasps, grid, VOXEL, workspace
+    )
+    antipodal = trained.plan(session, GraspQuery(planner="antipodal", grip=True))
+    assert antipodal.grip_dropped is not None
+
+
+def test_the_option_over_http_and_grpc(trained):
+    session = fused_session(trained)
+    server, port = build_server(trained, "127.0.0.1", 0)
+    try:
+        with TestClient(create_app(core=trained)) as http, GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
+            url = f"/sessions/{session}/grasps"
+            answers = [
+                http.get(url, params={"threshold": 0.0, **({} if value is None else {"grip": value})})
+                for value in (None, "false", "true")
+            ]
+            assert all(a.status_code == 200 for a in answers)
+            default, plain, on = (GraspResult.model_validate(a.json()) for a in answers)
+            assert plain.grip_dropped is None and on.grip_dropped is not None
+            assert (default.grasps, default.grip_dropped) == (on.grasps, on.grip_dropped)
+            for grip, expected in ((False, plain), (True, on), (None, on)):
+                over_grpc = rpc.grasps(session, threshold=0.0, grip=grip)
+                assert over_grpc.grasps == expected.grasps
+                assert over_grpc.grip_dropped == expected.grip_dropped
+            bad = http.get(url, params={"grip": "maybe"})
+            assert bad.status_code == 422 and "grip" in bad.json()["message"]
+            assert http.get("/model").json()["runtime"]["grip"] is True
+    finally:
+        server.stop(None)
+
+
+@pytest.mark.parametrize("grip", [True, False, None])
+def test_the_option_travels_whenever_set(grip):
+    """Off is sent too: left unset, the service applies its default (on)."""
+    message = convert.grasp_query_message("s", GraspQuery(grip=grip))
+    assert message.HasField("grip") is (grip is not None)
+    assert GraspQuery(**convert.grasp_query_dict(message)).grip is grip
+    assert GraspQuery(grip=grip).to_params().get("grip") == {True: "true", False: "false", None: None}[grip]
