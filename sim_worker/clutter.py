@@ -178,18 +178,14 @@ class ClutterRemoval:
         """One round on the scene of (seed, ``round_id``): grasp until the
         table is clear, no grasp is found, or two grasps in a row fail."""
         started = time.perf_counter()
-        rng = np.random.default_rng([self.config.seed, round_id])  # the same scene whenever it runs
-        self.camera.rng = rng
-        self.world.reset()  # the round depends on (seed, round) alone, not on earlier rounds
-        self.gripper = Gripper(self.world)
-        generate_scene(self.world, self.config.scene, self.objects, self.config.object_count, rng)
+        rng = self.new_scene(round_id)
         record = RoundRecord(round_id, f"{self.config.seed}-{round_id}", len(self.world.objects))
         # Disturbances draw from a stream of their own, so open and closed loop meet the same ones.
         disturber = Disturber(self.config.disturb, np.random.default_rng([self.config.seed, round_id, 7]))
         failures = aborts = 0
         withdrawn_from: Disturbance | None = None
         while self.world.objects and failures < MAX_CONSECUTIVE_FAILURES:
-            observed = self._look(rng)
+            observed = self.look(rng)
             if not observed.answer.grasps:
                 break
             grasp = self._select(observed.answer.grasps, rng)
@@ -225,7 +221,18 @@ class ClutterRemoval:
             images.write_contact_sheet(self.image_dir, record)
         return record
 
-    def _look(self, rng: np.random.Generator) -> Observed:
+    def new_scene(self, round_id: int) -> np.random.Generator:
+        """Build the scene of (seed, ``round_id``) in a reset world; returns the round's random
+        stream (camera noise and grasp choices draw from it), so that a round depends on (seed,
+        round) alone, not on earlier rounds."""
+        rng = np.random.default_rng([self.config.seed, round_id])
+        self.camera.rng = rng
+        self.world.reset()
+        self.gripper = Gripper(self.world)
+        generate_scene(self.world, self.config.scene, self.objects, self.config.object_count, rng)
+        return rng
+
+    def look(self, rng: np.random.Generator) -> Observed:
         """Observe the scene afresh and plan: the fixed views, or a wrist scan that stops early."""
         started = time.perf_counter()
         self.session_id = fresh_session(self.vgn, self.session_id)

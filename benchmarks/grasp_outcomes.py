@@ -1,0 +1,183 @@
+"""Executed outcomes of every candidate grasp, for choosing a grasp check's settings.
+
+A clutter-removal benchmark executes one grasp per look, so it says how a planner does but not
+which of the grasps it did *not* choose would have held. This runs clutter-removal rounds and, at
+every look, executes each candidate grasp (quality at least ``--candidates``, turn-averaged, no
+check) from the same saved simulator state, then advances the round as the benchmark does (a
+random grasp of the default request). Each round's candidates, their outcomes and the fused grid
+go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes).
+
+    python -m benchmarks.grasp_outcomes collect --scene pile --objects OBJ/pile/train --rounds 33 --seed 11 --out DIR
+    python -m benchmarks.grasp_outcomes report DIR
+
+``report`` replays the grip check (``service.grip``) on the stored grids at several alignment
+thresholds and prints, among the grasps a request without it would return (quality >= 0.8 and
+clearance-checked), how many it keeps and drops and how often each group succeeded. Choose
+settings on *training* objects; benchmark on held-out ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+from pathlib import Path
+
+import numpy as np
+
+from client.connect import connect
+from client.embedded import EmbeddedService
+from client.schemas import Grasp
+from service.grip import GripConfig, measure_grip
+from sim_worker.clutter import MAX_CONSECUTIVE_FAILURES, ClutterConfig, ClutterRemoval
+from sim_worker.grasping import Outcome, execute_grasp
+from sim_worker.results import ResultsFolder
+from vgn_data.files import write_atomically
+
+#: The threshold of the answer the benchmark advances with (the shipped model's operating one).
+DEFAULT_THRESHOLD = 0.8
+#: How outcomes are stored: their index in ``Outcome``.
+OUTCOMES = list(Outcome)
+
+
+def candidate_rows(grasps: list[Grasp], clear: set[tuple[float, ...]]) -> np.ndarray:
+    """(G, 10) float64: position, orientation [x, y, z, w], width, quality, clearance-checked."""
+    return np.array(
+        [[*g.position, *g.orientation, g.width, g.quality, _key(g) in clear] for g in grasps],
+        dtype=np.float64,
+    ).reshape(-1, 10)
+
+
+def _key(grasp: Grasp) -> tuple[float, ...]:
+    return tuple(np.round(grasp.position, 5))
+
+
+def collect(args: argparse.Namespace) -> int:
+    """Run the rounds not stored yet in ``args.out``."""
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    config = ClutterConfig(scene=args.scene, objects=args.objects, object_count=args.object_count,
+                           rounds=args.rounds, seed=args.seed, threshold=DEFAULT_THRESHOLD, selection="random",
+                           noise=args.noise, turn_average=True, clearance=True, grip=False)  # fmt: skip
+    with EmbeddedService(log_path=out / "service.log") as service, connect(service.url) as vgn:
+        episode = ClutterRemoval(config, vgn, ResultsFolder(out / "benchmark", config.as_json()))
+        try:
+            for round_id in range(args.rounds):
+                path = out / f"round{round_id:04d}.npz"
+                if not path.exists():
+                    looks = run_round(episode, round_id, args.candidates)
+                    write_atomically(path, _npz_bytes(looks))
+                    print(f"round {round_id}: {len(looks)} looks, "
+                          f"{sum(len(look['grasps']) for look in looks)} grasps executed", flush=True)  # fmt: skip
+        finally:
+            episode.close()
+    return 0
+
+
+def run_round(episode: ClutterRemoval, round_id: int, candidates: float) -> list[dict[str, np.ndarray]]:
+    """One round: at every look, every candidate grasp executed from the same state."""
+    rng = episode.new_scene(round_id)
+    vgn, world = episode.vgn, episode.world
+    looks, failures = [], 0
+    while world.objects and failures < MAX_CONSECUTIVE_FAILURES:
+        episode.look(rng)
+        session = episode.session_id
+        every = vgn.grasps(session, threshold=candidates, turn_average=True, clearance=False, grip=False,
+                           max_grasps=500).grasps  # fmt: skip
+        checked = vgn.grasps(session, threshold=candidates, turn_average=True, clearance=True, grip=False,
+                             max_grasps=500).grasps  # fmt: skip
+        state = world.save_state()
+        outcomes = []
+        for grasp in every:
+            trial = execute_grasp(world, episode.gripper, grasp.as_matrix(), remove_grasped=False)
+            outcomes.append(OUTCOMES.index(trial.outcome))
+            world.restore_state(state)
+        world.discard_state(state)
+        rows = candidate_rows(every, {_key(g) for g in checked})
+        looks.append({"grasps": rows, "outcomes": np.array(outcomes, np.int8), "grid": vgn.tsdf(session)})
+        default = [g for g in checked if g.quality >= DEFAULT_THRESHOLD]
+        if not default:
+            break
+        trial = execute_grasp(world, episode.gripper, default[int(rng.integers(len(default)))].as_matrix())
+        failures = 0 if trial.label else failures + 1
+        world.wait_for_rest()
+        world.remove_objects_outside()
+    return looks
+
+
+def _npz_bytes(looks: list[dict[str, np.ndarray]]) -> bytes:
+    buffer = io.BytesIO()
+    arrays = {f"{name}{index}": value for index, look in enumerate(looks) for name, value in look.items()}
+    np.savez_compressed(buffer, looks=len(looks), **arrays)
+    return buffer.getvalue()
+
+
+def load_looks(folder: Path) -> list[dict[str, np.ndarray]]:
+    """Every stored look of ``folder``'s rounds."""
+    looks = []
+    for path in sorted(folder.glob("round*.npz")):
+        with np.load(path) as data:
+            looks += [{name: data[f"{name}{i}"] for name in ("grasps", "outcomes", "grid")}
+                      for i in range(int(data["looks"]))]  # fmt: skip
+    return looks
+
+
+def report(args: argparse.Namespace) -> int:
+    """Print what the grip check keeps and drops of the default answer at each threshold."""
+    looks = load_looks(args.folder)
+    if not looks:
+        print(f"no rounds in {args.folder}")
+        return 1
+    voxel_size = args.size / looks[0]["grid"].shape[0]
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    rows = []
+    for alignment in args.alignments:
+        config = GripConfig(min_alignment=alignment)
+        kept, dropped = [], []
+        for look in looks:
+            grasps, held = look["grasps"], look["outcomes"] == success
+            answered = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
+            passes = measure_grip(look["grid"], voxel_size, grasps[:, :3], grasps[:, 3:7]).passes(config)
+            kept += list(held[answered & passes])
+            dropped += list(held[answered & ~passes])
+        rows.append((alignment, kept, dropped))
+    answered = len(rows[0][1]) + len(rows[0][2])
+    everything = rows[0][1] + rows[0][2]
+    print(f"{len(looks)} looks; {answered} grasps of quality >= {DEFAULT_THRESHOLD} that clear the approach, "
+          f"{100 * np.mean(everything):.1f} % successful")  # fmt: skip
+    print("min alignment | kept | kept success % | dropped | dropped success %")
+    for alignment, kept, dropped in rows:
+        print(
+            f"{alignment:13.2f} | {len(kept):4d} | {_percent(kept):>14} | {len(dropped):7d} | {_percent(dropped):>17}"
+        )
+    return 0
+
+
+def _percent(outcomes: list[bool]) -> str:
+    return f"{100 * np.mean(outcomes):.1f}" if outcomes else "-"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``collect`` or ``report``, as the arguments say."""
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+    run = commands.add_parser("collect", help="execute every candidate grasp of clutter-removal rounds")
+    run.add_argument("--scene", choices=["pile", "packed", "blocks"], default="pile")
+    run.add_argument("--objects", help="object set or URDF folder (choose settings on training objects)")
+    run.add_argument("--object-count", type=int, default=5)
+    run.add_argument("--rounds", type=int, default=30)
+    run.add_argument("--seed", type=int, default=11)
+    run.add_argument("--noise", action="store_true", help="Dex-Net depth noise on every view")
+    run.add_argument("--candidates", type=float, default=0.5, help="least quality of an executed candidate")
+    run.add_argument("--out", type=Path, required=True)
+    show = commands.add_parser("report", help="the grip check's verdicts against the executed outcomes")
+    show.add_argument("folder", type=Path)
+    show.add_argument("--alignments", type=float, nargs="+", default=[0.4, 0.5, 0.6, 0.7])
+    show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
+    args = parser.parse_args(argv)
+    return collect(args) if args.command == "collect" else report(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
