@@ -6,7 +6,7 @@ One run starts two fleets side by side (``client.fleet``: uvicorn replicas behin
 with one replica and one with two, in the service's default configuration, and measures
 
 1. the proxy's added latency: a grasp request (the default one, turn-averaged and
-   clearance-checked, on a 6-view session, answered from the session's kept network output so
+   clearance- and grip-checked, on a 6-view session, answered from the session's kept network output so
    that the request's own cost is small and steady) sent to the one-replica fleet's replica
    directly and through HAProxy, over HTTP and over gRPC, the four interleaved call by call on
    one session, each round starting with the next of them; reported as p50 and p95 of each and

@@ -22,9 +22,9 @@ One run measures the p50 and p95 latency (milliseconds) of
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
-   (turn-averaged and clearance-checked, unless ``VGN_TURN_AVERAGE=false`` or
-   ``VGN_CLEARANCE=false``), and the other way (``turn_average=false&clearance=false``, VGN's
-   plain answer, or both true when the default is plain; its ratio to the default, paired);
+   (turn-averaged, clearance- and grip-checked, unless ``VGN_TURN_AVERAGE``, ``VGN_CLEARANCE``
+   or ``VGN_GRIP`` is false), and the other way (all three false, VGN's
+   plain answer, or all true when the default is plain; its ratio to the default, paired);
 6. a grasp request over HTTP: ``VGNClient.grasps``, each after a new frame (posted untimed),
    so that each runs the network, by default and the other way; and without new frames, when the
    service answers from the session's last network output;
@@ -429,7 +429,7 @@ def http_grasp_operation(
     """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
     ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
     the network; without, the service answers from its last network output. ``switches``
-    ``None`` leaves turn averaging and the clearance check to the service's default, as a plain
+    ``None`` leaves turn averaging and the checks to the service's default, as a plain
     client does."""
     session_id = fused_session(client, frames)
     options = {"threshold": THRESHOLD, **(switches or {})}

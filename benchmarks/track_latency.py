@@ -3,7 +3,7 @@
     python -m benchmarks.track_latency --out docs/results/closed-loop-latency
 
 One uvicorn child serves both front ends in its default configuration (the default request:
-turn averaging and the clearance check). Measured, interleaved round by round:
+turn averaging, the clearance and grip checks). Measured, interleaved round by round:
 
 * ``Track`` cycle: one frame sent on an open ``Track`` stream until its grasps come back
   (``plan_every`` 1), client side; the stream stays open for the whole run;
