@@ -90,3 +90,26 @@ def server(random_checkpoint: Path) -> Iterator[EmbeddedService]:
 def vgn(server: EmbeddedService) -> Iterator[VGNClient]:
     with VGNClient(server.url) as client:
         yield client
+
+
+#: Ray gives its raylet a fixed 30 s to register at start-up; on the 2-core VM it has missed
+#: that now and then (under load, and once on a quiet machine), so the fixture tries again.
+START_ATTEMPTS = 3
+
+
+@pytest.fixture(scope="module")
+def ray_address() -> Iterator[str]:
+    """A local Ray instance (2 CPUs) for the module; the address commands join it by."""
+    ray = pytest.importorskip("ray")
+    for attempt in range(1, START_ATTEMPTS + 1):
+        try:
+            ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
+            break
+        except Exception as error:  # Ray raises a bare Exception for a start-up timeout
+            ray.shutdown()
+            if attempt == START_ATTEMPTS or "timed out during startup" not in str(error):
+                raise
+    try:
+        yield ray.get_runtime_context().gcs_address
+    finally:
+        ray.shutdown()

@@ -23,27 +23,6 @@ ray = pytest.importorskip("ray")
 SCENES = 3
 
 
-#: Ray gives its raylet a fixed 30 s to register at start-up; on the 2-core VM it has missed
-#: that now and then (under load, and once on a quiet machine), so the fixture tries again.
-START_ATTEMPTS = 3
-
-
-@pytest.fixture(scope="module")
-def ray_address() -> str:
-    for attempt in range(1, START_ATTEMPTS + 1):
-        try:
-            ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
-            break
-        except Exception as error:  # Ray raises a bare Exception for a start-up timeout
-            ray.shutdown()
-            if attempt == START_ATTEMPTS or "timed out during startup" not in str(error):
-                raise
-    try:
-        yield ray.get_runtime_context().gcs_address
-    finally:
-        ray.shutdown()
-
-
 def generate(address: str, url: str, out: Path, *extra: str) -> subprocess.Popen:
     command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", url, "--scene", "pile",
                "--objects", "blocks", "--scenes", str(SCENES), "--points", "4", "--renderer", "tiny",
@@ -185,8 +164,8 @@ def test_benchmark_on_ray_equals_a_single_process_run(ray_address, tmp_path):
     assert main([*common, "--out", str(tmp_path / "single")]) == 0
     assert main([*common, "--out", str(tmp_path / "ray"), "--ray", ray_address, "--workers", "2"]) == 0
     for name in ("rounds.csv", "grasps.csv"):
-        # The embedded services' default: the clearance check on.
-        expected = rows_without_timings(tmp_path / "single" / "antipodal-best-blocks-5-clearance" / name)
+        # The embedded services' default: the clearance and grip checks on.
+        expected = rows_without_timings(tmp_path / "single" / "antipodal-best-blocks-5-clearance-grip" / name)
         assert expected, f"{name} holds rows"
-        folder = tmp_path / "ray" / "antipodal-best-blocks-5-clearance"
+        folder = tmp_path / "ray" / "antipodal-best-blocks-5-clearance-grip"
         assert rows_without_timings(folder / name) == expected, name
