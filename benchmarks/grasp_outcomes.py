@@ -57,7 +57,8 @@ def collect(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     config = ClutterConfig(scene=args.scene, objects=args.objects, object_count=args.object_count,
                            rounds=args.rounds, seed=args.seed, threshold=DEFAULT_THRESHOLD, selection="random",
-                           noise=args.noise, turn_average=True, clearance=True, grip=False)  # fmt: skip
+                           noise=args.noise, views=args.views, turn_average=True, clearance=True,
+                           grip=False)  # fmt: skip
     with EmbeddedService(log_path=out / "service.log") as service, connect(service.url) as vgn:
         episode = ClutterRemoval(config, vgn, ResultsFolder(out / "benchmark", config.as_json()))
         try:
@@ -169,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--rounds", type=int, default=30)
     run.add_argument("--seed", type=int, default=11)
     run.add_argument("--noise", action="store_true", help="Dex-Net depth noise on every view")
+    run.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     run.add_argument("--candidates", type=float, default=0.5, help="least quality of an executed candidate")
     run.add_argument("--out", type=Path, required=True)
     show = commands.add_parser("report", help="the grip check's verdicts against the executed outcomes")

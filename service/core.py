@@ -25,7 +25,7 @@ from service.clearance import clear_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
-from service.grip import gripping_grasps
+from service.grip import MIN_GRIP_FRAMES, gripping_grasps
 from service.planner import (
     NO_MODEL_MESSAGE,
     GraspPlanner,
@@ -206,6 +206,7 @@ class PlanningService:
         grip = self.settings.grip if query.grip is None else query.grip
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
+            grip = grip and session.frame_count >= MIN_GRIP_FRAMES
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
             surface = session.volume.surface_points() if clearance else None

@@ -171,6 +171,18 @@ def test_the_core_checks_every_grasp_before_max_grasps(trained):
     assert antipodal.grip_dropped is not None
 
 
+def test_a_volume_of_one_frame_is_not_checked(trained):
+    """From one view the fused surface misleads the check: it runs from the second frame on."""
+    session = trained.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+    first, second = circle_views()[:2]
+    trained.add_frame(session, BoxScene().depth(first), first)
+    one = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True))
+    assert one.grip_dropped is None
+    assert one.grasps == trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=False)).grasps
+    trained.add_frame(session, BoxScene().depth(second), second)
+    assert trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True)).grip_dropped is not None
+
+
 def test_the_option_over_http_and_grpc(trained):
     session = fused_session(trained)
     server, port = build_server(trained, "127.0.0.1", 0)
