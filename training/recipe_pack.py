@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from sim_worker.recipes import object_ref, object_roots
 from training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
 from training.migrate import legacy_scenes, read_result
 from training.recipe_grids import grid_digest
@@ -27,6 +28,17 @@ def portable_generation(generation: dict[str, Any], object_refs: Iterable[str]) 
     return {**generation, "objects": sorted(folders)}
 
 
+def portable_objects(arrays: dict[str, np.ndarray], roots: dict[str, Path]) -> dict[str, np.ndarray]:
+    """A recipe's arrays with every ``file:`` object that lies under a known root (VGN's object
+    sets at ``$VGN_OBJECTS``, ``pybullet_data``, the built-in blocks) named by that root, as
+    scenes generated without ``$VGN_OBJECTS`` set record them; the sha256s are kept, so a
+    rebuild still proves the files are the same."""
+    refs = [str(ref) for ref in arrays["objects"]]
+    portable = [object_ref(Path(ref.removeprefix("file:")), roots) if ref.startswith("file:") else ref
+                for ref in refs]  # fmt: skip
+    return arrays if portable == refs else {**arrays, "objects": np.array(portable)}
+
+
 def _chunks(records: list[RecipeRecord], size: int) -> Iterable[list[RecipeRecord]]:
     for start in range(0, len(records), size):
         yield records[start : start + size]
@@ -37,7 +49,9 @@ def pack_raw(
     limit: int | None = None,
 ) -> list[dict[str, Any]]:  # fmt: skip
     """Pack the scenes of ``raw`` that carry a recipe and are not in ``out`` yet as new shards of
-    ``source``; the digest is taken of the grid fused from the raw depth the labels were made on."""
+    ``source``; the digest is taken of the grid fused from the raw depth the labels were made on.
+    Objects recorded by absolute path under a known root are named by the root
+    (:func:`portable_objects`)."""
     generation_path = raw.root / "generation.json"
     generation = json.loads(generation_path.read_text()) if generation_path.is_file() else {}
     if "gripper" not in generation:
@@ -49,11 +63,12 @@ def pack_raw(
     by_scene: dict[str, list[np.ndarray]] = {}
     for scene_id, row in zip(ids, rows, strict=True):
         by_scene.setdefault(scene_id, []).append(row)
-    records = []
+    records, roots = [], object_roots()
     for scene_id in sorted(set(by_scene) - done):
         arrays = raw.read_recipe(scene_id)
         if arrays is None:
             continue  # made before generation wrote recipes: it cannot be rebuilt
+        arrays = portable_objects(arrays, roots)
         grid = quantize(fuse_grid(raw.read_scene(scene_id), raw.setup, RESOLUTION, MAX_DEPTH))
         records.append(RecipeRecord(scene_id, arrays, grid_digest(grid), np.asarray(by_scene[scene_id])))
         if limit is not None and len(records) >= limit:

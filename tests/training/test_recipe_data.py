@@ -63,6 +63,28 @@ def test_generation_writes_a_recipe_per_scene_and_packing_verifies(raw: Path, tm
     assert RecipeFolder(data).manifest()["shards"] == [entry]
 
 
+def test_objects_recorded_by_path_are_packed_by_their_root(raw: Path, tmp_path: Path):
+    """Scenes generated without VGN_OBJECTS set name their objects by absolute path; packing names
+    each by the root it lies under, so the shards rebuild on any machine."""
+    from sim_worker.recipes import object_roots, resolve_ref
+
+    by_path = tmp_path / "raw"
+    shutil.copytree(raw, by_path)
+    roots = object_roots()
+    for recipe in RawDataset(by_path).recipes_dir.glob("*.npz"):
+        with np.load(recipe) as stored:
+            arrays = {name: stored[name] for name in stored.files}
+        arrays["objects"] = np.array(
+            [f"file:{resolve_ref(str(ref), roots).resolve()}" for ref in arrays["objects"]]
+        )
+        np.savez(recipe, **arrays)
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(by_path), "--source", "pile", "--out", str(data)).returncode == 0
+    assert RecipeFolder(data).manifest()["sources"]["pile"]["objects"] == ["builtin:"]
+    verified = vgn_data("verify", str(data), "--scenes", "10")
+    assert verified.returncode == 0 and "(100.0 %)" in verified.stdout, verified.stdout + verified.stderr
+
+
 def test_new_scenes_go_into_a_new_shard_and_old_ones_stay(server, raw: Path, tmp_path: Path):
     grown = tmp_path / "raw"
     shutil.copytree(raw, grown)
