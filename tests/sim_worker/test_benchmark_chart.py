@@ -28,7 +28,7 @@ def test_report_writes_the_chart(tmp_path: Path, capsys) -> None:
         config = ClutterConfig(scene=scene, object_count=int(count), planner=planner, model="m").as_json()
         ResultsFolder(tmp_path / f"{planner}-best-{scenario}", config).commit(finished_round(0, labels))
     argv = ["--report", "--out", str(tmp_path), "--selections", "best", "--scenarios", "blocks-5", "pile-5",
-            "--no-turn-average", "--no-clearance"]  # fmt: skip
+            "--no-turn-average", "--no-clearance", "--no-grip"]  # fmt: skip
     assert main(argv) == 0
     assert f"chart: {tmp_path / 'table.png'}" in capsys.readouterr().out
     chart = np.asarray(Image.open(tmp_path / "table.png").convert("RGB"))
