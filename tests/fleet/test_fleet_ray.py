@@ -4,7 +4,6 @@ process running the same rounds through the same fleet."""
 
 from __future__ import annotations
 
-import csv
 import os
 import shutil
 import subprocess
@@ -16,7 +15,7 @@ import pytest
 
 from client.embedded import free_port
 from client.fleet import Fleet, FleetConfig
-from sim_worker.results import TIMING_COLUMNS
+from tests.helpers.runs import rows_without_timings
 
 pytest.importorskip("ray")
 if shutil.which("haproxy") is None and not os.environ.get("CI"):
@@ -42,11 +41,6 @@ def clear_scene(url: str, results: Path, *extra: str) -> subprocess.CompletedPro
                "--object-count", "3", "--rounds", "3", "--threshold", "0.5", "--no-clearance", "--no-grip",
                "--results", str(results), *extra]  # fmt: skip
     return subprocess.run(command, capture_output=True, text=True, timeout=600)
-
-
-def rows_without_timings(path: Path) -> list[dict[str, str]]:
-    with path.open(newline="") as stream:
-        return [{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in csv.DictReader(stream)]
 
 
 def requests_per_replica(fleet: Fleet) -> dict[str, int]:

@@ -9,10 +9,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+from sim_worker.results import TIMING_COLUMNS
+
 
 def read_csv(path: Path) -> list[dict[str, str]]:
     with path.open(newline="") as stream:
         return list(csv.DictReader(stream))
+
+
+def rows_without_timings(path: Path) -> list[dict[str, str]]:
+    """The rows of a results CSV without the columns that hold wall-clock times, which differ
+    between any two runs of the same rounds."""
+    return [{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in read_csv(path)]
 
 
 def check_results(results: Path, rounds: int) -> dict:

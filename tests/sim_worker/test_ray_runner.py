@@ -3,7 +3,6 @@ module; the commands run as subprocesses that join it, as they would join a clus
 
 from __future__ import annotations
 
-import csv
 import os
 import signal
 import subprocess
@@ -15,7 +14,7 @@ import numpy as np
 import pytest
 
 from client.cli import main as cli_main
-from sim_worker.results import TIMING_COLUMNS
+from tests.helpers.runs import rows_without_timings
 from vgn_data.dataset import RawDataset
 
 ray = pytest.importorskip("ray")
@@ -117,15 +116,6 @@ def clear_scene(results: Path, *extra: str, url: str) -> subprocess.CompletedPro
     command = [sys.executable, "-m", "client.cli", "clear-scene", "--sim", "--renderer", "tiny", "--url", url,
                "--object-count", "3", "--rounds", "3", "--threshold", "0.5", "--results", str(results), *extra]  # fmt: skip
     return subprocess.run(command, capture_output=True, text=True, timeout=600)
-
-
-#: Columns that hold wall-clock times: they differ between any two runs.
-TIMING_COLUMNS = TIMING_COLUMNS
-
-
-def rows_without_timings(path: Path) -> list[dict[str, str]]:
-    with path.open(newline="") as stream:
-        return [{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in csv.DictReader(stream)]
 
 
 @pytest.mark.slow
