@@ -130,14 +130,19 @@ def report(args: argparse.Namespace) -> int:
         return 1
     voxel_size = args.size / looks[0]["grid"].shape[0]
     success = OUTCOMES.index(Outcome.SUCCESS)
+    # Each look is measured once; the thresholds only change the verdict on the measure.
+    measured = []
+    for look in looks:
+        grasps = look["grasps"]
+        answered = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
+        measure = measure_grip(look["grid"], voxel_size, grasps[:, :3], grasps[:, 3:7])
+        measured.append((look["outcomes"] == success, answered, measure))
     rows = []
     for alignment in args.alignments:
         config = GripConfig(min_alignment=alignment)
         kept, dropped = [], []
-        for look in looks:
-            grasps, held = look["grasps"], look["outcomes"] == success
-            answered = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
-            passes = measure_grip(look["grid"], voxel_size, grasps[:, :3], grasps[:, 3:7]).passes(config)
+        for held, answered, measure in measured:
+            passes = measure.passes(config)
             kept += list(held[answered & passes])
             dropped += list(held[answered & ~passes])
         rows.append((alignment, kept, dropped))

@@ -15,7 +15,7 @@ import pytest
 
 from client.embedded import free_port
 from client.fleet import Fleet, FleetConfig
-from tests.helpers.runs import rows_without_timings
+from tests.helpers.runs import assert_same_results
 
 pytest.importorskip("ray")
 if shutil.which("haproxy") is None and not os.environ.get("CI"):
@@ -59,10 +59,7 @@ def test_clear_scene_on_ray_through_the_fleet_equals_one_process(ray_address, fl
     spread = clear_scene(fleet.url, tmp_path / "ray", "--ray", ray_address, "--workers", "2")
     assert spread.returncode == 0, spread.stderr
     assert "rounds per node" in spread.stderr and "success rate" in spread.stdout
-    for name in ("rounds.csv", "grasps.csv"):
-        expected = rows_without_timings(tmp_path / "single" / name)
-        assert expected, f"{name} holds rows"
-        assert rows_without_timings(tmp_path / "ray" / name) == expected, name
+    assert_same_results(tmp_path / "single", tmp_path / "ray")
     after = requests_per_replica(fleet)
     assert len(after) == 2 and all(after[name] > before.get(name, 0) for name in after), (
         f"both replicas served the Ray workers' sessions: {before} -> {after}"

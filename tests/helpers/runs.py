@@ -54,3 +54,11 @@ def check_results(results: Path, rounds: int) -> dict:
 def clear_scene(*args: str) -> subprocess.CompletedProcess:
     command = [sys.executable, "-m", "client.cli", "clear-scene", "--sim", "--renderer", "tiny", *args]
     return subprocess.run(command, capture_output=True, text=True, timeout=600)
+
+
+def assert_same_results(expected: Path, got: Path) -> None:
+    """Two results folders hold the same rounds and attempts, timing columns apart."""
+    for name in ("rounds.csv", "grasps.csv"):
+        rows = rows_without_timings(expected / name)
+        assert rows, f"{name} holds rows"
+        assert rows_without_timings(got / name) == rows, name
