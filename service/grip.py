@@ -20,8 +20,8 @@ closes from a side no camera saw (its rays meet unobserved space or the back of 
 before any free space) cannot be judged and is left to the network. A volume fused from a
 single frame is not checked at all (:data:`MIN_GRIP_FRAMES`). Rays march through
 the coarse grid the network reads (trilinear reads, one ``map_coordinates`` call for all
-grasps): about half a millisecond for the handful of grasps a pile scene keeps at the 0.8
-threshold, about 2 ms for 40, on a busy 2-core CPU.
+grasps): about 0.4 ms for the two or so grasps a pile look keeps at the 0.8 threshold, about
+3 ms for 40, on a busy 2-core CPU.
 
 Frames and conventions (docs/conventions.md): grasp frame +z approach, y closing axis,
 origin midway between the finger bases; the pads' faces span z = 31.5-50 mm and x = ±10 mm
