@@ -244,8 +244,9 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
                        help="keep looking while approaching (fixed cameras at 10 Hz, the hand filtered out, a session "
                        "that forgets), re-plan, and re-target or give up when the aimed-at grasp is gone")  # fmt: skip
     clear.add_argument("--scan", choices=["fixed", "wrist"], default="fixed",
-                       help="look with the fixed --views, or with a wrist camera moving toward the scene, planning "
-                       "after every frame and stopping once the best grasp is stable (default %(default)s)")  # fmt: skip
+                       help="look with the fixed --views, or with a wrist camera circling the scene (three frames a third "
+                       "of a turn apart), planning after every frame and stopping once the best grasp is stable "
+                       "(default %(default)s)")  # fmt: skip
     _add_switches(clear, " (what was used is recorded in config.json)")
     clear.add_argument(
         "--results",

@@ -13,9 +13,12 @@ in view, was tried first and given up: the hand hides the object from every view
 at it, and what it leaves visible shifts the network's grasps by one to three voxels (up to
 22 mm and 40 degrees on untouched pile scenes), about what a disturbance does.
 
-``WristScan`` is ``clear-scene --scan wrist``: a wrist camera moves along an arc toward the
-scene, each frame is fused and planned on as it arrives, and the robot commits as soon as the
-best grasp is good enough and has stayed the same grasp for ``STABLE_PLANS`` plans.
+``WristScan`` is ``clear-scene --scan wrist``: a wrist camera circles the scene while closing in,
+each frame is fused and planned on as it arrives, and the robot commits as soon as the best
+grasp has stayed the same grasp for ``STABLE_PLANS`` plans, or at the arc's last frame. The
+frames lie a third of a turn apart because a grasp needs its object seen from more than one
+side: three frames spread around the scene plan about as well as the six fixed views, while a
+straight approach from one side planned worse with more frames (docs/closed-loop.md).
 """
 
 from __future__ import annotations
@@ -40,10 +43,12 @@ CHANGE_RADIUS = 0.06
 CHANGED_DEPTH = 0.01
 CHANGED_SHARE = 0.15
 
-#: The wrist camera's arc: from far and oblique to near and steep, looking at the workspace.
-WRIST_FRAMES = 8
-WRIST_DISTANCE = (0.70, 0.40)  # m from the workspace centre
-WRIST_TILT_DEG = (55.0, 15.0)  # from the vertical
+#: The wrist camera's arc: frames a third of a turn apart about the scene, from a little
+#: farther and more oblique to a little nearer and steeper, each looking at the workspace.
+WRIST_FRAMES = 3
+WRIST_SWEEP_DEG = 240.0  # azimuth from the first frame to the last
+WRIST_DISTANCE = (0.62, 0.55)  # m from the workspace centre
+WRIST_TILT_DEG = (35.0, 30.0)  # from the vertical
 #: The scan stops once the best grasp has been the same grasp (track id) for this many plans.
 STABLE_PLANS = 2
 
@@ -108,13 +113,15 @@ def near_target(
 
 
 def wrist_arc(azimuth: float, frames: int = WRIST_FRAMES) -> list[np.ndarray]:
-    """Camera poses (camera → world, OpenCV frame) of a wrist camera moving toward the scene
-    from ``azimuth`` (radians about world z): distance and tilt shrink linearly along the arc."""
+    """Camera poses (camera → world, OpenCV frame) of a wrist camera circling the scene from
+    ``azimuth`` (radians about world z) through ``WRIST_SWEEP_DEG``: azimuth grows and distance
+    and tilt shrink linearly along the arc."""
     distances = np.linspace(*WRIST_DISTANCE, frames)
     tilts = np.deg2rad(np.linspace(*WRIST_TILT_DEG, frames))
+    azimuths = azimuth + np.deg2rad(np.linspace(0.0, WRIST_SWEEP_DEG, frames))
     return [
-        camera_on_sphere(WORKSPACE_CENTRE, float(d), float(t), azimuth)
-        for d, t in zip(distances, tilts, strict=True)
+        camera_on_sphere(WORKSPACE_CENTRE, float(d), float(t), float(a))
+        for d, t, a in zip(distances, tilts, azimuths, strict=True)
     ]
 
 

@@ -13,7 +13,7 @@ import pytest
 from client.embedded import EmbeddedService
 from client.http import VGNClient
 from sim_worker.camera import SIM_INTRINSICS, WORKSPACE_CENTRE, Camera, six_views
-from sim_worker.closed_loop import WRIST_FRAMES, ApproachWatch, wrist_arc, wrist_scan
+from sim_worker.closed_loop import WRIST_FRAMES, WRIST_SWEEP_DEG, ApproachWatch, wrist_arc, wrist_scan
 from sim_worker.disturbance import Disturber, PlannedDisturbance, nearest_object
 from sim_worker.grasping import translated
 from sim_worker.gripper import Gripper
@@ -113,17 +113,20 @@ def test_the_watch_ignores_the_hand_and_sees_the_object_go(shipped: VGNClient, c
 def test_the_wrist_scan_stops_once_the_best_grasp_is_stable(shipped: VGNClient, pile: World):
     camera = Camera(pile)
     session = shipped.create_session(intrinsics=SIM_INTRINSICS).session_id
-    arc = wrist_arc(azimuth=0.4)
+    arc = wrist_arc(azimuth=0.4, frames=6)  # a longer arc than the default, to leave room to stop
     result = wrist_scan(shipped, session, camera, arc, {})
-    assert result.answer.grasps and 2 <= result.frames < WRIST_FRAMES
+    assert result.answer.grasps and 2 <= result.frames < len(arc)
     assert shipped.session(session).frame_count == result.frames
 
 
-def test_the_wrist_arc_moves_in_and_looks_at_the_workspace():
+def test_the_wrist_arc_circles_the_scene_moving_in_and_looks_at_the_workspace():
     arc = wrist_arc(azimuth=1.0)
     centre = np.asarray(WORKSPACE_CENTRE)
-    distances = [np.linalg.norm(pose[:3, 3] - centre) for pose in arc]
-    assert len(arc) == WRIST_FRAMES and distances[0] > distances[-1] + 0.25
+    offsets = [pose[:3, 3] - centre for pose in arc]
+    distances = [np.linalg.norm(offset) for offset in offsets]
+    assert len(arc) == WRIST_FRAMES and np.all(np.diff(distances) < 0)
+    azimuths = np.degrees([np.arctan2(offset[1], offset[0]) for offset in offsets])
+    assert np.allclose(np.diff(np.unwrap(azimuths, period=360)), WRIST_SWEEP_DEG / (WRIST_FRAMES - 1))
     for pose in arc:  # the optical axis passes near the workspace centre
         to_centre = centre - pose[:3, 3]
         assert np.degrees(np.arccos(np.clip(pose[:3, 2] @ to_centre / np.linalg.norm(to_centre), -1, 1))) < 8
