@@ -290,12 +290,13 @@ def failures_cell(row: dict) -> str:
 
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     """The results beside the paper's VGN and GPD figures, as a Markdown table with a line on the settings."""
+    # A wrist scan chooses its own frames: the fixed views named by --views are not used.
+    views = "wrist scan" if args.scan == "wrist" else f"{args.views} view(s)"
     lines = [
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
-        f"{args.views} view(s){', depth noise' if args.noise else ''}"
+        f"{views}{', depth noise' if args.noise else ''}"
         f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
-        f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}"
-        f"{', wrist scan' if args.scan == 'wrist' else ''}",
+        f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
         "| failures: approach contact / nothing held / slipped / collision | planning p50 ms | paper VGN ε=0.9 | paper GPD |",

@@ -8,7 +8,7 @@ import numpy as np
 from PIL import Image
 
 from benchmarks.chart import chart_series
-from benchmarks.clutter import PAPER_GPD, PAPER_TABLE_1, main
+from benchmarks.clutter import PAPER_GPD, PAPER_TABLE_1, main, markdown_table, parse_args
 from sim_worker.clutter import ClutterConfig
 from sim_worker.results import ResultsFolder, RoundRecord
 
@@ -48,3 +48,10 @@ def test_series_pair_measured_runs_with_the_paper() -> None:
     assert series[0].success == [(50.0, 30.0, 70.0), None] and series[1].success == [None, None]
     assert series[1].cleared == [None, (0.0, 0.0, 10.0)]
     assert series[2].success == [(62.3,) * 3, (87.6,) * 3] and series[3].cleared[0] == (26.1,) * 3
+
+
+def test_table_header_names_the_frames_a_round_used() -> None:
+    fixed = markdown_table([], parse_args(["--views", "side", "--noise"])).splitlines()[0]
+    wrist = markdown_table([], parse_args(["--scan", "wrist"])).splitlines()[0]
+    assert "side view(s), depth noise" in fixed
+    assert "wrist scan" in wrist and "view(s)" not in wrist
