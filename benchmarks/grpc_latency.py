@@ -36,7 +36,6 @@ from benchmarks.workload import (
     MAX_DEPTH,
     RESOLUTION,
     RUNTIME_VARIABLES,
-    THRESHOLD,
     WORKSPACE_SIZE,
     Frames,
 )
@@ -93,10 +92,8 @@ def grasp_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[O
         http.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
     return [
-        Operation(
-            GRASPS_HTTP, group, lambda k: http.grasps(session_id, threshold=THRESHOLD), "baseline", post_frame
-        ),
-        Operation(GRASPS_GRPC, group, lambda k: rpc.grasps(session_id, threshold=THRESHOLD), "", post_frame),
+        Operation(GRASPS_HTTP, group, lambda k: http.grasps(session_id), "baseline", post_frame),
+        Operation(GRASPS_GRPC, group, lambda k: rpc.grasps(session_id), "", post_frame),
     ]
 
 

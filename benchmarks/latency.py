@@ -1,6 +1,6 @@
 """Latency benchmark: what the service costs on top of calling Open3D and VGN directly.
 
-    python -m benchmarks.latency [--repeats N] [--model PATH] [--threads T] [--json PATH]
+    python -m benchmarks.latency [--repeats N] [--model PATH | --random-weights] [--threads T] [--json PATH]
 
 One run measures the p50 and p95 latency (milliseconds) of
 
@@ -18,7 +18,7 @@ One run measures the p50 and p95 latency (milliseconds) of
    ``http.client`` with its body and meta header built beforehand;
 4. running VGN *directly* (the baseline): the naive float32 eager forward pass of the network
    as trained (``torch.inference_mode``) on a (1, 1, 40, 40, 40) grid fused from 6 views,
-   then ``detect_grasps`` at threshold 0.9 — forward alone, detection alone, and their
+   then ``detect_grasps`` at the service's threshold — forward alone, detection alone, and their
    per-iteration sum; and, for comparison, the service's fast form of the network
    (``service.vgn.fast``) called directly;
 5. a grasp request in process: ``PlanningService.plan`` as the service answers by default
@@ -62,11 +62,13 @@ instead. Each operation gets ``--warmup`` untimed calls first. Frame uploads kee
 session per row; they queue their frames for the fine (cloud) volume and never fuse it (the
 service's worker would, in a lull, once a queue is a quarter full or its cloud was read).
 
-Depth frames are exact renderings of ``tests.helpers.scenes.BoxScene`` from ``circle_views()``. When
-no ``--model`` is given, random-initialised VGN weights are written to a temporary directory:
-the network's cost does not depend on its weights, but the *number of grasps* does, and with
-it part of detection and the size of the response (random weights rarely reach quality 0.9,
-so a trained model may return more grasps than this run sees).
+Depth frames are exact renderings of ``tests.helpers.scenes.BoxScene`` from ``circle_views()``.
+The servers load the packaged model unless ``--model`` names other weights, and every grasp
+request leaves the threshold to the service (the model card's operating threshold), as a plain
+client does: the default request then returns grasps, so its clearance and grip checks run
+and are timed. ``--random-weights`` writes random-initialised weights to a temporary directory
+instead: the network's cost does not depend on its weights, but the *number of grasps* does,
+and random weights return none, so the checks cost nothing in such a run.
 
 The benchmark process and the server share the machine's cores (the client waits while the
 server works, so they do not compute at the same time). Open3D uses its own thread pool in
@@ -105,7 +107,6 @@ from benchmarks.workload import (
     MAX_DEPTH,
     RESOLUTION,
     RUNTIME_VARIABLES,
-    THRESHOLD,
     VIEWS,
     WORKSPACE_SIZE,
     Frames,
@@ -117,7 +118,7 @@ from client.schemas import SWITCHES, FrameMeta, GraspQuery, Pose, SessionCreate
 from service.core import PlanningService
 from service.planner import resolve_device, resolve_precision
 from service.runtime import configured_threads
-from service.settings import Settings
+from service.settings import PACKAGED_MODEL, Settings
 from service.tsdf import TRUNCATION_VOXELS, TSDFVolume
 from service.vgn.checkpoint import load_vgn, save_vgn
 from service.vgn.detection import DetectionConfig, detect_grasps
@@ -149,7 +150,7 @@ FAST_FORWARD = "VGN forward, service's fast form"
 GRASPS_HTTP_AGAIN = "VGNClient.grasps (second server)"
 GRASPS_HTTP_KEPT = "VGNClient.grasps, no new frame (output reused)"
 GRASPS_HTTP_KEPT_AGAIN = "VGNClient.grasps, no new frame (second server)"
-DETECTION = f"detect_grasps (threshold {THRESHOLD})"
+DETECTION = "detect_grasps (the service's threshold)"
 FORWARD_DETECTION = "forward + detection"
 PLAN = "PlanningService.plan (service default)"
 
@@ -181,10 +182,11 @@ def sum_of(name: str, parts: list[Measurement], note: str = "") -> Measurement:
 
 
 # Inputs --------------------------------------------------------------------------------------
-def weights_path(model: Path | None, directory: Path) -> tuple[Path, bool]:
-    """The weights to benchmark and whether they are random (then written to ``directory``)."""
-    if model is not None:
-        return model, False
+def weights_path(model: Path | None, random_weights: bool, directory: Path) -> tuple[Path, bool]:
+    """The weights to benchmark and whether they are random (then written to ``directory``):
+    ``model``, else the packaged model, else (``random_weights``) random-initialised weights."""
+    if not random_weights:
+        return model or PACKAGED_MODEL, False
     torch.manual_seed(0)
     path = directory / "random-vgn.safetensors"
     save_vgn(VGN(), path)
@@ -298,13 +300,15 @@ def fused_grid(frames: Frames) -> np.ndarray:
     return volume.grid()
 
 
-def network_operations(weights: Path, device: torch.device, grid: np.ndarray) -> tuple[list[Operation], int]:
-    """Direct forward then direct detection (run in this order; detection reads the
-    forward's output), and the grasp count."""
+def network_operations(
+    weights: Path, device: torch.device, grid: np.ndarray, threshold: float
+) -> tuple[list[Operation], int]:
+    """Direct forward then direct detection at ``threshold`` (run in this order; detection
+    reads the forward's output), and the grasp count."""
     network = load_vgn(weights).to(device)
     tensor = torch.from_numpy(grid)[None, None].to(device)
     voxel_size, pose = WORKSPACE_SIZE / RESOLUTION, np.eye(4)
-    config = DetectionConfig(threshold=THRESHOLD)
+    config = DetectionConfig(threshold=threshold)
     output: list[np.ndarray] = []
 
     def forward(_: int) -> None:
@@ -432,7 +436,7 @@ def http_grasp_operation(
     ``None`` leaves turn averaging and the checks to the service's default, as a plain
     client does."""
     session_id = fused_session(client, frames)
-    options = {"threshold": THRESHOLD, **(switches or {})}
+    options = switches or {}
     grasps = len(client.grasps(session_id, **options).grasps)
     n = len(frames)
 
@@ -459,15 +463,12 @@ def throughput(url: str, frames: Frames, sessions: int, requests: int) -> dict[s
     try:
         ids = [fused_session(client, frames) for client in clients]
         for client, session_id in zip(clients, ids, strict=True):
-            client.grasps(session_id, threshold=THRESHOLD)  # warm
+            client.grasps(session_id)  # warm
         start = threading.Barrier(sessions + 1)
 
         def ask(index: int) -> list[float]:
             start.wait()
-            return [
-                timed(lambda _: clients[index].grasps(ids[index], threshold=THRESHOLD), k)
-                for k in range(requests)
-            ]
+            return [timed(lambda _: clients[index].grasps(ids[index]), k) for k in range(requests)]
 
         with ThreadPoolExecutor(sessions) as pool:
             futures = [pool.submit(ask, index) for index in range(sessions)]
@@ -571,7 +572,9 @@ def format_targets(checks: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def environment(args: argparse.Namespace, weights: Path, random_weights: bool) -> dict[str, Any]:
+def environment(
+    args: argparse.Namespace, weights: Path, random_weights: bool, threshold: float
+) -> dict[str, Any]:
     """Versions, machine, settings and inputs of the run, so that its figures can be compared."""
     return {
         "python": platform.python_version(),
@@ -587,7 +590,7 @@ def environment(args: argparse.Namespace, weights: Path, random_weights: bool) -
         "random_weights": random_weights,
         "frame": f"{INTRINSICS.width}x{INTRINSICS.height} float32",
         "grid": f"{RESOLUTION}^3 from {VIEWS} views",
-        "threshold": THRESHOLD,
+        "threshold": threshold,
         "load_average_at_start": load_average(),
     }
 
@@ -615,7 +618,7 @@ def format_header(env: dict[str, Any]) -> str:
             f"  server runtime: {env.get('server_runtime')}",
             f"  weights: {weights}",
             f"  input: {env['frame']} BoxScene depth frames; grid {env['grid']}; "
-            f"threshold {env['threshold']}",
+            f"threshold {env['threshold']} (the service's default for these weights)",
             f"  load average at start (1/5/15 min): {env['load_average_at_start']}",
         ]
     )
@@ -655,7 +658,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--model",
         type=Path,
         default=None,
-        help="VGN weights (.safetensors/.pt/.pth); default: random weights",
+        help="VGN weights (.safetensors/.pt/.pth); default: the packaged model",
+    )
+    parser.add_argument(
+        "--random-weights",
+        action="store_true",
+        help="random-initialised weights instead: the network's cost alone (they return no grasps)",
     )
     parser.add_argument(
         "--threads",
@@ -684,6 +692,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--json", type=Path, default=None, help="also write the results here")
     parser.add_argument("--skip-grpc", action="store_true", help="leave out the gRPC rows")
     args = parser.parse_args(argv)
+    if args.model is not None and args.random_weights:
+        parser.error("--model and --random-weights exclude each other")
     if args.repeats < 1 or args.warmup < 0 or (args.threads is not None and args.threads < 1):
         parser.error("--repeats and --threads must be >= 1, --warmup >= 0")
     return args
@@ -697,6 +707,7 @@ class Results:
     grasps: dict[str, int]
     concurrency: list[dict[str, Any]]
     server_runtime: dict[str, Any]
+    threshold: float  # the service's default for the weights: every row's
 
 
 def measure_all(args: argparse.Namespace, weights: Path) -> Results:
@@ -714,10 +725,13 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         core = PlanningService.from_settings(
             Settings(model=weights, torch_threads=threads, device=args.device, api_key=None)
         )
-        network, direct_grasps = network_operations(weights, resolve_device(args.device), fused_grid(frames))
-        plan, core_grasps = core_plan_operation(core, frames, GraspQuery(threshold=THRESHOLD))
+        threshold = client.model().threshold
+        network, direct_grasps = network_operations(
+            weights, resolve_device(args.device), fused_grid(frames), threshold
+        )
+        plan, core_grasps = core_plan_operation(core, frames, GraspQuery())
         other = other_options(service_defaults(runtime))
-        other_query = GraspQuery(threshold=THRESHOLD, **other)
+        other_query = GraspQuery(**other)
         plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, other))
         grasps_http, http_grasps = http_grasp_operation(client, frames)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
@@ -755,7 +769,7 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
     bare = find(rows, FRAME_HTTP_BARE).p50
     find(rows, FRAME_HTTP).note += f" ({find(rows, FRAME_HTTP).p50 / bare:.2f}x the bare upload)"
     grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
-    return Results(rows, grasps, concurrency, runtime)
+    return Results(rows, grasps, concurrency, runtime, threshold)
 
 
 def format_concurrency(rows: list[dict[str, Any]]) -> str:
@@ -791,12 +805,12 @@ def main(argv: list[str] | None = None) -> int:
     """Measure, print the report and the target checks, and write the JSON file if asked."""
     args = parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="vgn-bench-") as directory:
-        weights, random_weights = weights_path(args.model, Path(directory))
+        weights, random_weights = weights_path(args.model, args.random_weights, Path(directory))
         load_at_start = load_average()
         requested_threads = args.threads  # measure_all replaces it with the service's choice
         results = measure_all(args, weights)
         grpc_rows, grpc_checks = grpc_section(args, weights, requested_threads)
-    env = environment(args, weights, random_weights)
+    env = environment(args, weights, random_weights, results.threshold)
     env["load_average_at_start"] = load_at_start
     env["server_runtime"] = results.server_runtime
     gpu = str(results.server_runtime.get("device", env["device"])).startswith("cuda")
@@ -807,7 +821,7 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table(results.rows))
     grasps = results.grasps
     print(
-        f"\ngrasps returned at threshold {THRESHOLD}: direct {grasps['direct']}, "
+        f"\ngrasps returned at threshold {results.threshold}: direct {grasps['direct']}, "
         f"in-process {grasps['in_process']}, HTTP {grasps['http']}"
     )
     if results.concurrency:

@@ -318,6 +318,7 @@ def latency_page(results: Path) -> str:
             facts.append(f"load average at start {env['load_average_at_start'][0]}")
         if env.get("torch"):
             facts.append(f"torch {env['torch']}")
+        facts += latency_inputs(report)
         parts.append("; ".join(facts) + ".\n")
         lines = ["| operation | p50 ms | p95 ms |", "| --- | ---: | ---: |"]
         rows = list(report.get("results") or []) + list((report.get("grpc") or {}).get("results") or [])
@@ -328,6 +329,23 @@ def latency_page(results: Path) -> str:
             parts.append("\n".join(["| target | value | result |", "| --- | --- | --- |"]
                                    + [target_row(t) for t in targets]) + "\n")  # fmt: skip
     return "\n".join(parts)
+
+
+def latency_inputs(report: dict[str, Any]) -> list[str]:
+    """Which weights a latency run loaded and how many grasps its HTTP requests returned: with
+    none (random weights), the clearance and grip checks had nothing to check and cost nothing."""
+    env, grasps = report.get("environment") or {}, report.get("grasps") or {}
+    facts = []
+    if "random_weights" in env:
+        facts.append(
+            "random-initialised weights"
+            if env["random_weights"]
+            else f"weights `{Path(env['weights']).name}`"
+        )
+    if "http" in grasps:
+        threshold = f" at threshold {env['threshold']}" if "threshold" in env else ""
+        facts.append(f"{grasps['http']} grasps a request{threshold}")
+    return facts
 
 
 def target_row(target: Any) -> str:

@@ -1,8 +1,9 @@
 """What the latency benchmarks feed the service, so that their rows measure the same work.
 
 ``benchmarks.latency`` and ``benchmarks.grpc_latency`` upload the same depth frames into the
-same workspace and grid, ask at the same threshold, and start their servers in the same
-(default) configuration; the HTTP and gRPC rows then differ only in the transport.
+same workspace and grid, leave the threshold to the service (the model card's operating
+threshold, as a plain client does), and start their servers in the same (default)
+configuration; the HTTP and gRPC rows then differ only in the transport.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ WORKSPACE_SIZE = 0.3
 RESOLUTION = 40
 MAX_DEPTH = 2.0
 DEPTH_SCALE = 1000.0  # PNG units per metre: millimetres
-THRESHOLD = 0.9
 VIEWS = 6
 #: Variables that would override the service's own choice of runtime settings.
 RUNTIME_VARIABLES = (

@@ -56,7 +56,9 @@ def test_headline_table_and_readme_block(tmp_path: Path, monkeypatch):
     clutter_results(tmp_path, [ROW, {**ROW, "scenario": "blocks-5", "planner": "vgn"}])
     clutter_results(noisy, [ROW], settings="seed 1, rounds per scenario 100, six view(s), depth noise")
     table = report.headline_table(tmp_path)
-    assert "| scenario | `vgn` | `vgn+turns+clearance` | paper's VGN |" in table, "plain first, then by options"
+    assert "| scenario | `vgn` | `vgn+turns+clearance` | paper's VGN |" in table, (
+        "plain first, then by options"
+    )
     lines = table.splitlines()
     assert lines.index("| blocks-5 | 56.2 / 44.4 | - | 87.6 / 90.1 |") < lines.index(
         "| pile-5 | - | 56.2 / 44.4 | 62.3 / 46.4 |"
@@ -87,6 +89,20 @@ def test_latency_table_with_date_and_machine(tmp_path: Path):
         and "| gRPC frame upload | 5.20 | 6.00 |" in page
     )
     assert "| grasp request p50 <= 25 ms | 10.6 | pass |" in page
+
+
+def test_latency_table_says_which_weights_and_how_many_grasps(tmp_path: Path):
+    runs = {"packaged": ({"random_weights": False, "weights": "/x/vgn.safetensors", "threshold": 0.8}, 2),
+            "random": ({"random_weights": True, "weights": "/tmp/random-vgn.safetensors", "threshold": 0.9}, 0)}  # fmt: skip
+    for name, (env, grasps) in runs.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "latency.json").write_text(json.dumps({
+            "environment": env, "grasps": {"direct": grasps, "in_process": grasps, "http": grasps},
+            "results": [{"name": "grasp request over HTTP", "p50_ms": 20.0, "p95_ms": 22.0}],
+        }))  # fmt: skip
+    page = report.latency_page(tmp_path)
+    assert "weights `vgn.safetensors`; 2 grasps a request at threshold 0.8." in page
+    assert "random-initialised weights; 0 grasps a request at threshold 0.9." in page
 
 
 def test_no_results_say_how_to_add_them(tmp_path: Path):
