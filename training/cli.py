@@ -222,6 +222,14 @@ def build_parser() -> argparse.ArgumentParser:
         "trial labels; usually the same weights as --init",
     )
     run.add_argument(
+        "--teacher-views",
+        choices=["original", "six"],
+        default=DEFAULTS["teacher_views"],
+        help="what the teacher sees of each scene: its original observation, or (recipe folders) the "
+        "scene rendered clean from VGN's six evaluation views, cached beside the student's "
+        "observations (default %(default)s)",
+    )
+    run.add_argument(
         "--distill-weight",
         metavar="W",
         type=float,
@@ -333,10 +341,12 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         teacher=args.teacher,
         distill_weight=args.distill_weight,
         soft_per_draw=args.soft_per_draw,
+        teacher_views=args.teacher_views,
         observations=ObservationSettings(
             per_scene=args.observations,
             original=args.original,
             noise_fraction=args.observation_noise,
+            sensor=args.observation_sensor,
             side_view_fraction=args.observation_side_views,
         ),  # fmt: skip
         resume=args.resume,

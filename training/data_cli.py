@@ -85,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="depth errors of the noisy fresh observations (default %(default)s)")  # fmt: skip
     render.add_argument("--side-view-fraction", type=float, default=ObservationSettings.side_view_fraction,
                         help="share of fresh observations that are one side view (default %(default)s)")  # fmt: skip
+    render.add_argument("--views", choices=["random", "six"], default=ObservationSettings.views,
+                        help="fresh observations from data generation's random views or VGN's six "
+                        "evaluation views (default %(default)s)")  # fmt: skip
     render.add_argument("--no-original", dest="original", action="store_false",
                         help="every observation fresh (default: the first is the scene's original one)")  # fmt: skip
     render.add_argument("--workers", type=int, default=1)
@@ -139,7 +142,7 @@ def _render(args: argparse.Namespace) -> int:
 
     settings = ObservationSettings(per_scene=args.per_scene, original=args.original,
                                    noise_fraction=args.noise_fraction, sensor=args.sensor,
-                                   side_view_fraction=args.side_view_fraction)  # fmt: skip
+                                   side_view_fraction=args.side_view_fraction, views=args.views)  # fmt: skip
     if args.workers < 1:
         raise ValueError("--workers must be >= 1")
     out = args.out or default_cache_dir() / "observations"

@@ -38,6 +38,9 @@ OBSERVATION_FORMAT = 2
 SENSORS = ("dex", "structured-light")
 #: Single side views look from this far off vertical (degrees), as data generation's.
 SIDE_VIEW_TILT_DEG = (45.0, 65.0)
+#: How fresh observations place their cameras: data generation's random views, or VGN's six
+#: evaluation views on a circle (the benchmark's; a teacher's privileged view of a scene).
+VIEWS = ("random", "six")
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,7 @@ class ObservationSettings:
     side view (tilt U(45°, 65°)); with probability ``noise_fraction`` the depth carries the
     errors of ``sensor``: ``"dex"`` (Dex-Net noise, ``sim_worker.camera.DepthNoise``) or
     ``"structured-light"`` (``sim_worker.sensors.StructuredLightNoise``; docs/sensors.md).
+    ``views="six"`` takes VGN's six evaluation views instead of random ones (no side views).
     """
 
     per_scene: int = 1
@@ -59,21 +63,25 @@ class ObservationSettings:
     noise_fraction: float = 0.5
     sensor: str = "dex"
     seed: int = 0
+    views: str = "random"
 
     def __post_init__(self) -> None:
         if self.per_scene < 1 or self.max_views < 1:
             raise ValueError("per_scene and max_views must be >= 1")
         if self.sensor not in SENSORS:
             raise ValueError(f"sensor must be one of {SENSORS}, got {self.sensor!r}")
+        if self.views not in VIEWS:
+            raise ValueError(f"views must be one of {VIEWS}, got {self.views!r}")
         for name in ("side_view_fraction", "noise_fraction"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
 
     def key(self) -> str:
         """Short hash of everything an observation depends on besides the scene."""
-        text = json.dumps(
-            {**asdict(self), "format": OBSERVATION_FORMAT, "resolution": RESOLUTION}, sort_keys=True
-        )
+        fields = asdict(self)
+        if fields["views"] == "random":
+            del fields["views"]  # so caches rendered before the choice existed keep their key
+        text = json.dumps({**fields, "format": OBSERVATION_FORMAT, "resolution": RESOLUTION}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 
     def rng(self, scene_id: str, slot: int) -> np.random.Generator:
@@ -84,9 +92,11 @@ class ObservationSettings:
 
 def draw_cameras(settings: ObservationSettings, rng: np.random.Generator) -> tuple[list[np.ndarray], bool]:
     """Camera poses (camera → world) of one fresh observation, and whether it is noisy."""
-    from sim_worker.camera import random_views
+    from sim_worker.camera import random_views, six_views
 
     noisy = bool(rng.random() < settings.noise_fraction)
+    if settings.views == "six":
+        return six_views(), noisy
     if rng.random() < settings.side_view_fraction:
         return random_views(rng, 1, tilt_deg=SIDE_VIEW_TILT_DEG), noisy
     return random_views(rng, int(rng.integers(1, settings.max_views + 1))), noisy

@@ -54,8 +54,16 @@ from training.grids import MAX_DEPTH, RESOLUTION
 from training.loss import distillation_loss, gather, per_label_loss
 from training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
 from training.observations import ObservationSettings
+from training.recipe_shards import RecipeFolder
 from training.shards import ShardFolder, manifest_summary
 from vgn_data.files import remove_stale_temporaries
+
+#: What a teacher may see of a scene (``TrainConfig.teacher_views``).
+TEACHER_VIEWS = ("original", "six")
+#: The teacher's privileged view: the scene rendered clean from VGN's six evaluation views.
+TEACHER_SIX_VIEWS = ObservationSettings(
+    per_scene=1, original=False, views="six", noise_fraction=0.0, side_view_fraction=0.0
+)
 
 
 class TrainingError(Exception):
@@ -101,6 +109,10 @@ class TrainConfig:
     distill_weight: float = 1.0
     #: soft labels drawn per scene draw (from the teacher's grasp-region voxels)
     soft_per_draw: int = 512
+    #: what the teacher sees of each scene: its original observation, or (recipe folders only)
+    #: a clean rendering from VGN's six evaluation views (``TEACHER_SIX_VIEWS``), a view of the
+    #: scene no stored grid holds, whatever the student is shown
+    teacher_views: str = "original"
     #: observations of recipe folders: how many per scene are rendered and how they are drawn
     observations: ObservationSettings = field(default_factory=ObservationSettings)
     resume: bool = False
@@ -136,6 +148,10 @@ class TrainConfig:
             raise TrainingError(f"--teacher: no weights file at {self.teacher}")
         if self.distill_weight < 0 or self.soft_per_draw < 1:
             raise TrainingError("--distill-weight must be >= 0 and --soft-per-draw >= 1")
+        if self.teacher_views not in TEACHER_VIEWS:
+            raise TrainingError(f"--teacher-views must be one of {TEACHER_VIEWS}, got {self.teacher_views!r}")
+        if self.teacher_views != "original" and self.teacher is None:
+            raise TrainingError("--teacher-views needs --teacher")
 
 
 @dataclass
@@ -352,8 +368,13 @@ def _teacher_targets(
     if config.teacher is None:
         return None
     started = time.perf_counter()
+    sources = (
+        [scene.source for scene in scenes]
+        if config.teacher_views == "original"
+        else _six_view_sources(config, scenes)
+    )
     try:
-        soft = teach(Path(config.teacher), [scene.source for scene in scenes], str(device), config.progress)
+        soft = teach(Path(config.teacher), sources, str(device), config.progress)
     except CheckpointError as error:
         raise TrainingError(f"--teacher: {error}") from None
     log(
@@ -361,6 +382,18 @@ def _teacher_targets(
         f"{len(soft)} scenes ({time.perf_counter() - started:.0f} s)"
     )
     return soft
+
+
+def _six_view_sources(config: TrainConfig, scenes: list[Scene]) -> list[Any]:
+    """Each scene's clean six-view observation (rendered into the cache where missing), for the
+    teacher. Only recipe folders can be seen anew: a scene of any other folder is refused."""
+    others = [str(path) for path in config.data if not RecipeFolder(Path(path)).exists()]
+    if others:
+        raise TrainingError(f"--teacher-views six needs recipe folders; not recipes: {', '.join(others)}")
+    seen, _ = load_scenes(config.data, config.resolution, config.max_depth, config.cache, TEACHER_SIX_VIEWS,
+                          config.workers, config.progress)  # fmt: skip
+    by_key = {scene.key: scene.source for scene in seen}
+    return [by_key[scene.key] for scene in scenes]
 
 
 def _initial_network(config: TrainConfig) -> VGN:
@@ -401,6 +434,8 @@ def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
         identity["max_train_scenes"] = config.max_train_scenes
     if config.teacher is not None:
         identity["teacher"] = weights_id(Path(config.teacher))
+    if config.teacher_views != "original":  # absent otherwise, so earlier checkpoints still resume
+        identity["teacher_views"] = config.teacher_views
     return identity
 
 
@@ -499,6 +534,9 @@ def _training_settings(
             "grasp-region voxel of each training scene, moved with the scene's augmentation",
             "weight": config.distill_weight,
             "soft_labels_per_draw": config.soft_per_draw,
+            "teacher_views": "each scene's original observation"
+            if config.teacher_views == "original"
+            else "each scene rendered clean from VGN's six evaluation views",
         },
         "observations": asdict(config.observations)
         if any(isinstance(s.source, RenderedObservations) for s in train_scenes)

@@ -209,3 +209,73 @@ def test_training_draws_fresh_observations_from_the_cache(raw: Path, tmp_path: P
     assert trained.returncode == 0, trained.stderr
     card = json.loads((tmp_path / "w.card.json").read_text())
     assert card["training"]["observations"]["per_scene"] == 3
+
+
+def test_six_view_observations_are_the_evaluation_views_and_old_cache_keys_stand(raw: Path, tmp_path: Path):
+    from dataclasses import asdict
+
+    from training.grids import RESOLUTION
+    from training.observations import OBSERVATION_FORMAT, draw_cameras
+
+    before = {**asdict(ObservationSettings()), "format": OBSERVATION_FORMAT, "resolution": RESOLUTION}
+    del before["views"]  # a cache rendered before views could be chosen
+    assert (
+        ObservationSettings().key()
+        == __import__("hashlib").sha256(json.dumps(before, sort_keys=True).encode()).hexdigest()[:12]
+    )
+    six = ObservationSettings(
+        per_scene=1, original=False, views="six", noise_fraction=0.0, side_view_fraction=0.0
+    )
+    assert six.key() != ObservationSettings(per_scene=1, original=False, noise_fraction=0.0).key()
+    from sim_worker.camera import six_views
+
+    poses, noisy = draw_cameras(six, six.rng("any", 0))
+    assert not noisy and all(np.allclose(a, b) for a, b in zip(poses, six_views(), strict=True))
+    with pytest.raises(ValueError, match="views"):
+        ObservationSettings(views="four")
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(raw), "--source", "pile", "--out", str(data)).returncode == 0
+    rendered = vgn_data("render", str(data), "--views", "six", "--no-original", "--noise-fraction", "0",
+                        "--side-view-fraction", "0", "--out", str(tmp_path / "cache"))  # fmt: skip
+    assert rendered.returncode == 0, rendered.stderr
+    (path,) = render_cache(data, tmp_path / "cache", six)  # the command's settings: nothing new rendered
+    grids = np.load(path)
+    original = np.load(render_cache(data, tmp_path / "cache", ObservationSettings())[0])
+    assert grids.shape == original.shape and not np.array_equal(grids, original)
+
+
+def test_a_teacher_sees_the_clean_six_views_and_the_card_says_so(raw: Path, tmp_path: Path):
+    from service.settings import PACKAGED_MODEL
+
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(raw), "--source", "pile", "--out", str(data)).returncode == 0
+    common = ["-m", "training.cli", "--data", str(data), "--cache", str(tmp_path / "cache"), "--epochs", "1",
+              "--val-fraction", "0", "--no-progress", "--teacher", str(PACKAGED_MODEL), "--teacher-views", "six"]  # fmt: skip
+    trained = run(*common, "--observations", "2", "--observation-noise", "1", "--observation-sensor",
+                  "structured-light", "--out", str(tmp_path / "w.safetensors"))  # fmt: skip
+    assert trained.returncode == 0, trained.stderr
+    card = json.loads((tmp_path / "w.card.json").read_text())["training"]
+    assert (
+        card["distillation"]["teacher_views"] == "each scene rendered clean from VGN's six evaluation views"
+    )
+    assert card["observations"]["sensor"] == "structured-light" and card["observations"]["per_scene"] == 2
+    six = ObservationSettings(
+        per_scene=1, original=False, views="six", noise_fraction=0.0, side_view_fraction=0.0
+    )
+    assert len(list((tmp_path / "cache").glob(f"*-{six.key()}.npy"))) == 1, "the teacher's views were cached"
+    alone = run(
+        "-m",
+        "training.cli",
+        "--data",
+        str(data),
+        "--teacher-views",
+        "six",
+        "--out",
+        str(tmp_path / "x.safetensors"),
+    )
+    assert alone.returncode != 0 and "--teacher-views needs --teacher" in alone.stderr
+    legacy = tmp_path / "raw-copy"
+    shutil.copytree(raw, legacy)
+    not_recipes = run("-m", "training.cli", "--data", str(legacy), "--teacher", str(PACKAGED_MODEL), "--teacher-views",
+                      "six", "--epochs", "1", "--no-progress", "--out", str(tmp_path / "y.safetensors"))  # fmt: skip
+    assert not_recipes.returncode != 0 and "needs recipe folders" in not_recipes.stderr
