@@ -87,8 +87,10 @@ def grasp_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[O
     group, n = "10 grasps HTTP|gRPC", len(frames)
 
     def post_frame(k: int) -> None:  # so that every request runs the network
-        if k % 15 == 0:  # few frames queued for the cloud: the worker leaves them be
+        if k % 15 == 0:  # few frames queued for the cloud; every view again, so each request sees the scene
             http.reset_session(session_id)
+            for depth, pose in zip(frames.depths, frames.poses, strict=True):
+                http.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
         http.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
     return [

@@ -65,7 +65,8 @@ service's worker would, in a lull, once a queue is a quarter full or its cloud w
 Depth frames are exact renderings of ``tests.helpers.scenes.BoxScene`` from ``circle_views()``.
 The servers load the packaged model unless ``--model`` names other weights, and every grasp
 request leaves the threshold to the service (the model card's operating threshold), as a plain
-client does: the default request then returns grasps, so its clearance and grip checks run
+client does: the default request then returns grasps (two on the fully fused scene; the report
+gives the median and least count of the timed requests), so its clearance and grip checks run
 and are timed. ``--random-weights`` writes random-initialised weights to a temporary directory
 instead: the network's cost does not depend on its weights, but the *number of grasps* does,
 and random weights return none, so the checks cost nothing in such a run.
@@ -120,7 +121,7 @@ from service.planner import resolve_device, resolve_precision
 from service.runtime import configured_threads
 from service.settings import PACKAGED_MODEL, Settings
 from service.tsdf import TRUNCATION_VOXELS, TSDFVolume
-from service.vgn.checkpoint import load_vgn, save_vgn
+from service.vgn.checkpoint import load_vgn, save_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import VGN
@@ -183,8 +184,8 @@ def sum_of(name: str, parts: list[Measurement], note: str = "") -> Measurement:
 
 # Inputs --------------------------------------------------------------------------------------
 def weights_path(model: Path | None, random_weights: bool, directory: Path) -> tuple[Path, bool]:
-    """The weights to benchmark and whether they are random (then written to ``directory``):
-    ``model``, else the packaged model, else (``random_weights``) random-initialised weights."""
+    """The weights to benchmark and whether they are random: random-initialised weights written
+    to ``directory`` when ``random_weights``, else ``model``, else the packaged model."""
     if not random_weights:
         return model or PACKAGED_MODEL, False
     torch.manual_seed(0)
@@ -283,8 +284,10 @@ def core_plan_operation(
     n = len(frames)
 
     def post_frame(k: int) -> None:  # so that every call runs the network
-        if k % 15 == 0:
+        if k % 15 == 0:  # every view again, so that every request sees the whole scene
             core.reset_session(session_id)
+            for depth, pose in zip(frames.depths, frames.poses, strict=True):
+                core.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
         core.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
     operation = Operation(name, "5 grasps in-process", lambda k: core.plan(session_id, query), "", post_frame)
@@ -429,26 +432,35 @@ def http_grasp_operation(
     group: str = "6 grasps HTTP",
     new_frame: bool = True,
     switches: dict[str, bool] | None = None,
+    counts: list[int] | None = None,
 ) -> tuple[Operation, int]:
     """``VGNClient.grasps`` on a session with every view fused, and its grasp count. With
     ``new_frame`` a frame is posted (untimed) before each request, so that every request runs
-    the network; without, the service answers from its last network output. ``switches``
-    ``None`` leaves turn averaging and the checks to the service's default, as a plain
-    client does."""
+    the network (every 15 requests the session is reset and every view fused again); without,
+    the service answers from its last network output. ``switches`` ``None`` leaves turn
+    averaging and the checks to the service's default, as a plain client does. ``counts``
+    collects the grasp count of every call (how much the timed checks had to check)."""
     session_id = fused_session(client, frames)
     options = switches or {}
     grasps = len(client.grasps(session_id, **options).grasps)
     n = len(frames)
 
     def post_frame(k: int) -> None:
-        if k % 15 == 0:  # few frames queued for the cloud: the worker leaves them be
+        if k % 15 == 0:  # few frames queued for the cloud; every view again, so each request sees the scene
             client.reset_session(session_id)
+            for depth, pose in zip(frames.depths, frames.poses, strict=True):
+                client.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
         client.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
+
+    def ask(_: int) -> None:
+        answer = client.grasps(session_id, **options)
+        if counts is not None:
+            counts.append(len(answer.grasps))
 
     operation = Operation(
         name,
         group,
-        lambda k: client.grasps(session_id, **options),
+        ask,
         "target" if new_frame and switches is None else "",
         post_frame if new_frame else None,
     )
@@ -586,13 +598,23 @@ def environment(
         "repeats": args.repeats,
         "warmup": args.warmup,
         "schedule": args.schedule,
-        "weights": str(weights),
+        "weights": shown_path(weights),
+        "weights_id": weights_id(weights),
         "random_weights": random_weights,
         "frame": f"{INTRINSICS.width}x{INTRINSICS.height} float32",
         "grid": f"{RESOLUTION}^3 from {VIEWS} views",
         "threshold": threshold,
         "load_average_at_start": load_average(),
     }
+
+
+def shown_path(path: Path) -> str:
+    """``path`` relative to the working directory when inside it: result files carry no
+    machine's folders."""
+    try:
+        return str(path.resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return path.name
 
 
 def load_average() -> list[float]:
@@ -694,6 +716,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.model is not None and args.random_weights:
         parser.error("--model and --random-weights exclude each other")
+    if args.model is None and not args.random_weights and not PACKAGED_MODEL.is_file():
+        parser.error(f"no packaged model at {PACKAGED_MODEL}: give --model or --random-weights")
     if args.repeats < 1 or args.warmup < 0 or (args.threads is not None and args.threads < 1):
         parser.error("--repeats and --threads must be >= 1, --warmup >= 0")
     return args
@@ -733,7 +757,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         other = other_options(service_defaults(runtime))
         other_query = GraspQuery(**other)
         plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, other))
-        grasps_http, http_grasps = http_grasp_operation(client, frames)
+        timed_counts: list[int] = []
+        grasps_http, http_grasps = http_grasp_operation(client, frames, counts=timed_counts)
         grasps_again, _ = http_grasp_operation(second, frames, GRASPS_HTTP_AGAIN, "7 steadiness")
         grasps_kept, _ = http_grasp_operation(client, frames, GRASPS_HTTP_KEPT, new_frame=False)
         kept_again, _ = http_grasp_operation(
@@ -768,7 +793,8 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         row.note = f"{row.p50 / find(rows, default).p50:.2f}x the default row above (paired)"
     bare = find(rows, FRAME_HTTP_BARE).p50
     find(rows, FRAME_HTTP).note += f" ({find(rows, FRAME_HTTP).p50 / bare:.2f}x the bare upload)"
-    grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps}
+    grasps = {"direct": direct_grasps, "in_process": core_grasps, "http": http_grasps,
+              "http_timed_median": float(np.median(timed_counts)), "http_timed_min": min(timed_counts)}  # fmt: skip
     return Results(rows, grasps, concurrency, runtime, threshold)
 
 
@@ -822,7 +848,8 @@ def main(argv: list[str] | None = None) -> int:
     grasps = results.grasps
     print(
         f"\ngrasps returned at threshold {results.threshold}: direct {grasps['direct']}, "
-        f"in-process {grasps['in_process']}, HTTP {grasps['http']}"
+        f"in-process {grasps['in_process']}, HTTP {grasps['http']} (every view fused); the timed default "
+        f"requests over HTTP: median {grasps['http_timed_median']:g}, least {grasps['http_timed_min']}"
     )
     if results.concurrency:
         print("\ngrasp requests over HTTP from concurrent sessions (micro-batched; VGN_REUSE_OUTPUT=false):")

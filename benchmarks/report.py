@@ -337,14 +337,13 @@ def latency_inputs(report: dict[str, Any]) -> list[str]:
     env, grasps = report.get("environment") or {}, report.get("grasps") or {}
     facts = []
     if "random_weights" in env:
-        facts.append(
-            "random-initialised weights"
-            if env["random_weights"]
-            else f"weights `{Path(env['weights']).name}`"
-        )
+        shown = f"`{env['weights_id']}`" if env.get("weights_id") else f"`{Path(env['weights']).name}`"
+        facts.append("random-initialised weights" if env["random_weights"] else f"weights {shown}")
     if "http" in grasps:
         threshold = f" at threshold {env['threshold']}" if "threshold" in env else ""
-        facts.append(f"{grasps['http']} grasps a request{threshold}")
+        timed = (f" (the timed default requests: median {grasps['http_timed_median']:g}, least "
+                 f"{grasps['http_timed_min']})" if "http_timed_median" in grasps else "")  # fmt: skip
+        facts.append(f"{grasps['http']} grasps a request on the fused scene{threshold}{timed}")
     return facts
 
 

@@ -92,17 +92,20 @@ def test_latency_table_with_date_and_machine(tmp_path: Path):
 
 
 def test_latency_table_says_which_weights_and_how_many_grasps(tmp_path: Path):
-    runs = {"packaged": ({"random_weights": False, "weights": "/x/vgn.safetensors", "threshold": 0.8}, 2),
+    runs = {"packaged": ({"random_weights": False, "weights": "service/models/vgn.safetensors",
+                          "weights_id": "0123456789ab", "threshold": 0.8}, 2),
             "random": ({"random_weights": True, "weights": "/tmp/random-vgn.safetensors", "threshold": 0.9}, 0)}  # fmt: skip
     for name, (env, grasps) in runs.items():
         (tmp_path / name).mkdir()
         (tmp_path / name / "latency.json").write_text(json.dumps({
-            "environment": env, "grasps": {"direct": grasps, "in_process": grasps, "http": grasps},
+            "environment": env, "grasps": {"direct": grasps, "in_process": grasps, "http": grasps,
+                                           "http_timed_median": grasps, "http_timed_min": grasps},
             "results": [{"name": "grasp request over HTTP", "p50_ms": 20.0, "p95_ms": 22.0}],
         }))  # fmt: skip
     page = report.latency_page(tmp_path)
-    assert "weights `vgn.safetensors`; 2 grasps a request at threshold 0.8." in page
-    assert "random-initialised weights; 0 grasps a request at threshold 0.9." in page
+    assert "weights `0123456789ab`; 2 grasps a request on the fused scene at threshold 0.8 (the timed" in page
+    assert "default requests: median 2, least 2)" in page
+    assert "random-initialised weights; 0 grasps a request on the fused scene at threshold 0.9 (" in page
 
 
 def test_no_results_say_how_to_add_them(tmp_path: Path):

@@ -9,6 +9,7 @@ import pytest
 
 from benchmarks import latency
 from service.settings import PACKAGED_MODEL
+from service.vgn.checkpoint import card_path, weights_id
 
 
 def test_default_request_is_timed_with_the_packaged_model_and_returns_grasps(tmp_path: Path) -> None:
@@ -28,10 +29,13 @@ def test_default_request_is_timed_with_the_packaged_model_and_returns_grasps(tmp
     ]
     assert latency.main(argv) == 0
     report = json.loads(out.read_text())
-    env = report["environment"]
-    assert env["random_weights"] is False and Path(env["weights"]) == PACKAGED_MODEL
-    assert env["threshold"] == 0.8, "the packaged model card's operating threshold"
-    assert report["grasps"]["http"] > 0 and report["grasps"]["in_process"] == report["grasps"]["http"]
+    env, grasps = report["environment"], report["grasps"]
+    assert env["random_weights"] is False and Path(env["weights"]) == Path("service/models/vgn.safetensors")
+    assert env["weights_id"] == weights_id(PACKAGED_MODEL), "the result file names its weights by content"
+    card = json.loads(card_path(PACKAGED_MODEL).read_text())
+    assert env["threshold"] == card["threshold"], "the packaged model card's operating threshold"
+    assert grasps["http"] > 0 and grasps["in_process"] == grasps["http"]
+    assert grasps["http_timed_median"] > 0, "most timed default requests had grasps to check"
 
 
 def test_random_weights_and_a_model_exclude_each_other(capsys) -> None:
