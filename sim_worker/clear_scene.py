@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
             return 1
     print(
         f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "
-        f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {config.model}"
+        f"{config.looking}, {config.selection} grasp, threshold {config.threshold}, model {config.model}"
         + (", turn averaging" if config.turn_average else "")
         + (", clearance check" if config.clearance else "")
         + (", grip check" if config.grip else "")

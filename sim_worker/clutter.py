@@ -84,6 +84,12 @@ class ClutterConfig:
     closed_loop: bool = False
     scan: Scan = "fixed"
 
+    @property
+    def looking(self) -> str:
+        """How a round looks at the scene, for report headers: the wrist scan chooses its own
+        frames, so the fixed views it does not use are not named."""
+        return "wrist scan" if self.scan == "wrist" else f"{self.views} view(s)"
+
     def __post_init__(self) -> None:
         for name, allowed in (
             ("scene", ClutterScene),

@@ -416,7 +416,7 @@ def clear_scene_on_ray(
     print(f"rounds per node: {_node_split(clutter.nodes)}", file=sys.stderr)
     print(
         f"\nclear-scene --sim --ray: {config.scene}, {config.object_count} objects, "
-        f"{config.views} view(s), {config.selection} grasp, threshold {config.threshold}, model {config.model}"
+        f"{config.looking}, {config.selection} grasp, threshold {config.threshold}, model {config.model}"
     )
     print(summary_table(summary))
     print(f"results: {results_dir}/ (rounds.csv, grasps.csv, summary.json)")

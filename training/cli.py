@@ -17,7 +17,7 @@ from training.card import write_card
 from training.checkpoint import CheckpointMismatch, checkpoint_path
 from training.evaluate import EvaluationConfig, executed_grasp_success
 from training.observations import ObservationSettings
-from training.train import TrainConfig, TrainingError, TrainResult, train
+from training.train import TEACHER_VIEWS, TrainConfig, TrainingError, TrainResult, train
 
 #: The run's defaults live on TrainConfig; the options show and use them.
 DEFAULTS = {f.name: f.default for f in fields(TrainConfig)}
@@ -223,9 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--teacher-views",
-        choices=["original", "six"],
+        choices=TEACHER_VIEWS,
         default=DEFAULTS["teacher_views"],
-        help="what the teacher sees of each scene: its original observation, or (recipe folders) the "
+        help="what the teacher sees of each scene: its first observation (the original one unless "
+        "--no-original), or (recipe folders) the "
         "scene rendered clean from VGN's six evaluation views, cached beside the student's "
         "observations (default %(default)s)",
     )

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from client.log_level import add_log_level_option, configure_logging
 from sim_worker.recipes import RecipeError
-from training.observations import ObservationSettings
+from training.observations import VIEWS, ObservationSettings
 from training.shards import ShardError
 
 
@@ -85,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="depth errors of the noisy fresh observations (default %(default)s)")  # fmt: skip
     render.add_argument("--side-view-fraction", type=float, default=ObservationSettings.side_view_fraction,
                         help="share of fresh observations that are one side view (default %(default)s)")  # fmt: skip
-    render.add_argument("--views", choices=["random", "six"], default=ObservationSettings.views,
+    render.add_argument("--views", choices=VIEWS, default=ObservationSettings.views,
                         help="fresh observations from data generation's random views or VGN's six "
                         "evaluation views (default %(default)s)")  # fmt: skip
     render.add_argument("--no-original", dest="original", action="store_false",

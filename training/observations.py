@@ -81,6 +81,8 @@ class ObservationSettings:
         fields = asdict(self)
         if fields["views"] == "random":
             del fields["views"]  # so caches rendered before the choice existed keep their key
+        else:  # six fixed views: the random views' knobs change nothing, so they name no other cache
+            del fields["max_views"], fields["side_view_fraction"]
         text = json.dumps({**fields, "format": OBSERVATION_FORMAT, "resolution": RESOLUTION}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 

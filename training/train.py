@@ -109,7 +109,8 @@ class TrainConfig:
     distill_weight: float = 1.0
     #: soft labels drawn per scene draw (from the teacher's grasp-region voxels)
     soft_per_draw: int = 512
-    #: what the teacher sees of each scene: its original observation, or (recipe folders only)
+    #: what the teacher sees of each scene: its first observation (the original one unless
+    #: ``observations.original`` is off), or (recipe folders only)
     #: a clean rendering from VGN's six evaluation views (``TEACHER_SIX_VIEWS``), a view of the
     #: scene no stored grid holds, whatever the student is shown
     teacher_views: str = "original"
@@ -176,6 +177,7 @@ def train(
 ) -> TrainResult:
     """Run (or continue) training as ``config`` says and write weights, card and checkpoint."""
     config.check()
+    _check_teacher_views(config)
     _check_checkpoint(config)
     # Only this run's own files (weights, card, checkpoint, curves): the folder may hold others.
     remove_stale_temporaries(config.out.parent, f".{config.out.stem}.*.tmp", recursive=False)
@@ -384,12 +386,17 @@ def _teacher_targets(
     return soft
 
 
+def _check_teacher_views(config: TrainConfig) -> None:
+    """Refuse a teacher view the data cannot give, before any data is read: only recipe
+    folders can be seen anew."""
+    others = [str(path) for path in config.data if not RecipeFolder(Path(path)).exists()]
+    if config.teacher_views == "six" and others:
+        raise TrainingError(f"--teacher-views six needs recipe folders; not recipes: {', '.join(others)}")
+
+
 def _six_view_sources(config: TrainConfig, scenes: list[Scene]) -> list[Any]:
     """Each scene's clean six-view observation (rendered into the cache where missing), for the
-    teacher. Only recipe folders can be seen anew: a scene of any other folder is refused."""
-    others = [str(path) for path in config.data if not RecipeFolder(Path(path)).exists()]
-    if others:
-        raise TrainingError(f"--teacher-views six needs recipe folders; not recipes: {', '.join(others)}")
+    teacher."""
     seen, _ = load_scenes(config.data, config.resolution, config.max_depth, config.cache, TEACHER_SIX_VIEWS,
                           config.workers, config.progress)  # fmt: skip
     by_key = {scene.key: scene.source for scene in seen}
@@ -436,6 +443,8 @@ def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
         identity["teacher"] = weights_id(Path(config.teacher))
     if config.teacher_views != "original":  # absent otherwise, so earlier checkpoints still resume
         identity["teacher_views"] = config.teacher_views
+    if config.observations != ObservationSettings():  # the same: absent for the default
+        identity["observations"] = config.observations.key()
     return identity
 
 
@@ -534,7 +543,7 @@ def _training_settings(
             "grasp-region voxel of each training scene, moved with the scene's augmentation",
             "weight": config.distill_weight,
             "soft_labels_per_draw": config.soft_per_draw,
-            "teacher_views": "each scene's original observation"
+            "teacher_views": "each scene's first observation (the original one unless --no-original)"
             if config.teacher_views == "original"
             else "each scene rendered clean from VGN's six evaluation views",
         },

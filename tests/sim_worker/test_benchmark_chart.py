@@ -55,3 +55,5 @@ def test_table_header_names_the_frames_a_round_used() -> None:
     wrist = markdown_table([], parse_args(["--scan", "wrist"])).splitlines()[0]
     assert "side view(s), depth noise" in fixed
     assert "wrist scan" in wrist and "view(s)" not in wrist
+    assert ClutterConfig(scene="pile", object_count=5, scan="wrist").looking == "wrist scan"
+    assert ClutterConfig(scene="pile", object_count=5, views="side").looking == "side view(s)"
