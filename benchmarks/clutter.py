@@ -33,7 +33,7 @@ from client.embedded import EmbeddedService
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES
 from sim_worker.clear_scene import resolve_planner, service_default, service_runtime
-from sim_worker.clutter import ClutterConfig, ClutterRemoval
+from sim_worker.clutter import ClutterConfig, ClutterRemoval, looking
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
 from vgn_data.files import write_atomically
@@ -290,11 +290,9 @@ def failures_cell(row: dict) -> str:
 
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     """The results beside the paper's VGN and GPD figures, as a Markdown table with a line on the settings."""
-    # A wrist scan chooses its own frames: the fixed views named by --views are not used.
-    views = "wrist scan" if args.scan == "wrist" else f"{args.views} view(s)"
     lines = [
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
-        f"{views}{', depth noise' if args.noise else ''}"
+        f"{looking(args.views, args.scan)}{', depth noise' if args.noise else ''}"
         f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
         f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}",
         "",

@@ -82,15 +82,13 @@ def frame_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[O
 def grasp_operations(http: VGNClient, rpc: GRPCClient, frames: Frames) -> list[Operation]:
     """A grasp request over each front end on one shared 6-view session, each after an untimed new frame."""
     session_id = http.create_session(intrinsics=INTRINSICS).session_id  # one session, both front ends
-    for depth, pose in zip(frames.depths, frames.poses, strict=True):
-        http.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+    frames.fuse(http.add_frame, session_id)
     group, n = "10 grasps HTTP|gRPC", len(frames)
 
     def post_frame(k: int) -> None:  # so that every request runs the network
         if k % 15 == 0:  # few frames queued for the cloud; every view again, so each request sees the scene
             http.reset_session(session_id)
-            for depth, pose in zip(frames.depths, frames.poses, strict=True):
-                http.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+            frames.fuse(http.add_frame, session_id)
         http.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
     return [

@@ -278,16 +278,14 @@ def core_plan_operation(
 ) -> tuple[Operation, int]:
     """``PlanningService.plan`` on a session with every view fused, and its grasp count."""
     session_id = new_session(core)
-    for depth, pose in zip(frames.depths, frames.poses, strict=True):
-        core.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+    frames.fuse(core.add_frame, session_id)
     grasps = len(core.plan(session_id, query).grasps)
     n = len(frames)
 
     def post_frame(k: int) -> None:  # so that every call runs the network
         if k % 15 == 0:  # every view again, so that every request sees the whole scene
             core.reset_session(session_id)
-            for depth, pose in zip(frames.depths, frames.poses, strict=True):
-                core.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+            frames.fuse(core.add_frame, session_id)
         core.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
     operation = Operation(name, "5 grasps in-process", lambda k: core.plan(session_id, query), "", post_frame)
@@ -420,8 +418,7 @@ def http_frame_operations(client: VGNClient, frames: Frames) -> list[Operation]:
 def fused_session(client: VGNClient, frames: Frames) -> str:
     """A session of ``client``'s service with every view fused."""
     session_id = client.create_session(intrinsics=INTRINSICS).session_id
-    for depth, pose in zip(frames.depths, frames.poses, strict=True):
-        client.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+    frames.fuse(client.add_frame, session_id)
     return session_id
 
 
@@ -448,8 +445,7 @@ def http_grasp_operation(
     def post_frame(k: int) -> None:
         if k % 15 == 0:  # few frames queued for the cloud; every view again, so each request sees the scene
             client.reset_session(session_id)
-            for depth, pose in zip(frames.depths, frames.poses, strict=True):
-                client.add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
+            frames.fuse(client.add_frame, session_id)
         client.add_frame(session_id, frames.depths[k % n], frames.poses[k % n], max_depth=MAX_DEPTH)
 
     def ask(_: int) -> None:

@@ -8,6 +8,7 @@ configuration; the HTTP and gRPC rows then differ only in the transport.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,6 +43,12 @@ class Frames:
 
     def __len__(self) -> int:
         return len(self.poses)
+
+    def fuse(self, add_frame: Callable[..., object], session_id: str) -> None:
+        """Post every view to ``session_id`` through ``add_frame`` (``VGNClient.add_frame`` or
+        ``PlanningService.add_frame``: both take the session, depth, pose and ``max_depth``)."""
+        for depth, pose in zip(self.depths, self.poses, strict=True):
+            add_frame(session_id, depth, pose, max_depth=MAX_DEPTH)
 
 
 def render_frames(count: int = VIEWS) -> Frames:

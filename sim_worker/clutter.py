@@ -51,6 +51,12 @@ Selection = Literal["best", "random"]
 Planner = Literal["vgn", "antipodal"]
 
 
+def looking(views: str, scan: str) -> str:
+    """How a round looks at the scene, for report headers: the wrist scan chooses its own
+    frames, so the fixed views it does not use are not named."""
+    return "wrist scan" if scan == "wrist" else f"{views} view(s)"
+
+
 @dataclass(frozen=True)
 class ClutterConfig:
     """Settings of a clear-scene run; a resumed run must use the same ones."""
@@ -86,9 +92,8 @@ class ClutterConfig:
 
     @property
     def looking(self) -> str:
-        """How a round looks at the scene, for report headers: the wrist scan chooses its own
-        frames, so the fixed views it does not use are not named."""
-        return "wrist scan" if self.scan == "wrist" else f"{self.views} view(s)"
+        """How a round looks at the scene, for report headers (:func:`looking`)."""
+        return looking(self.views, self.scan)
 
     def __post_init__(self) -> None:
         for name, allowed in (

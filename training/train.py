@@ -389,8 +389,10 @@ def _teacher_targets(
 def _check_teacher_views(config: TrainConfig) -> None:
     """Refuse a teacher view the data cannot give, before any data is read: only recipe
     folders can be seen anew."""
+    if config.teacher_views == "original":
+        return
     others = [str(path) for path in config.data if not RecipeFolder(Path(path)).exists()]
-    if config.teacher_views == "six" and others:
+    if others:
         raise TrainingError(f"--teacher-views six needs recipe folders; not recipes: {', '.join(others)}")
 
 
