@@ -13,6 +13,9 @@ Inputs:
   ``docs/results/``. Every folder becomes one table on the benchmark page.
 - ``docs/results/**/latency.json``: ``python -m benchmarks.latency --json FOLDER/latency.json``.
   Every file becomes one table on the performance page.
+- ``docs/results/**/device_planning.json``: ``python -m benchmarks.device_planning time VOLUME.npz
+  --json FOLDER/device_planning.json`` (a request's planning steps on CPU and GPU; the date and
+  machine are in the file).
 - ``measured.json`` beside either (``{"date": "YYYY-MM-DD", "cpu": "...", "cores": N}``): when and
   where the results were measured, for files that do not record it themselves; ``--stamp FOLDER``
   writes it for this machine and today, right after a run.
@@ -20,7 +23,7 @@ Inputs:
   ``service/models/vgn.card.json`` (the shipped model's card).
 
 Outputs in ``docs/generated/`` (included into the pages by ``pymdownx.snippets``): ``clutter.md``,
-``latency.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
+``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
 ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
 results exist, the block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` in
 README.md is rewritten with the headline table too (without dates: the benchmark page carries them).
@@ -356,6 +359,43 @@ def target_row(target: Any) -> str:
         verdict = "-" if passed is None else ("pass" if passed else "miss")
         return f"| {cell(name)} | {cell(value)} | {verdict} |"
     return f"| {cell(target)} | - | - |"
+
+
+# Planning on a GPU ----------------------------------------------------------------------------
+def device_planning_table(runs: list[dict[str, Any]]) -> str:
+    """One row per request, planning step and concurrent run of each device in ``runs``."""
+    lines = ["| device | what | p50 ms | p95 ms | n |", "| --- | --- | --- | ---: | ---: |"]
+    for run in runs:
+        label = f"{run['device']} ({run['device_name']}, {run['precision']}, {run['torch_threads']} threads)"
+        for name, row in {**run["requests"], **run["steps"]}.items():
+            shown = f"**{name}**" if name in run["requests"] else name
+            lines.append(
+                f"| {cell(label)} | {shown} | {row['p50_ms']:.2f} | {row['p95_ms']:.2f} | {row['n']} |"
+            )
+        if "concurrent" in run:
+            c = run["concurrent"]
+            what = f"default request, {c['threads']} threads at once ({c['requests_per_s']} requests/s)"
+            lines.append(f"| {cell(label)} | {what} | {c['p50_ms']:.2f} | {c['p95_ms']:.2f} | {c['n']} |")
+    return "\n".join(lines) + "\n"
+
+
+def device_planning_page(results: Path) -> str:
+    """Every ``device_planning.json``: where it ran, and its table."""
+    paths = sorted(results.rglob("device_planning.json"))
+    if not paths:
+        return "No `device_planning.json` result files are in `docs/results/` yet.\n"
+    parts = []
+    for path in paths:
+        report = json.loads(path.read_text())
+        machine = report.get("machine") or {}
+        devices = ", ".join(dict.fromkeys(run["device_name"] for run in report["runs"]))
+        parts.append(f"#### `{relative(path.parent, results)}`\n")
+        parts.append(
+            f"measured on {report.get('date', '?')[:10]}: {devices}, {machine.get('cpus', '?')} CPU cores, "
+            f"torch {machine.get('torch', '?')}; weights `{report.get('model', '?')}`.\n"
+        )
+        parts.append(device_planning_table(report["runs"]))
+    return "\n".join(parts)
 
 
 # Fleet ----------------------------------------------------------------------------------------
@@ -696,6 +736,7 @@ def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
     return {
         "clutter.md": ("docs/results/**/table.json", lambda: clutter_page(results)),
         "latency.md": ("docs/results/**/latency.json", lambda: latency_page(results)),
+        "device-planning.md": ("docs/results/**/device_planning.json", lambda: device_planning_page(results)),
         "fleet.md": ("docs/results/**/fleet.json", lambda: fleet_page(results)),
         "training-data.md": (
             "data/manifest.json, docs/results/**/recipe-training.json",

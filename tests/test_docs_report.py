@@ -122,8 +122,8 @@ def test_the_command_writes_then_checks(tmp_path: Path, monkeypatch):
     argv = [str(results), "--out", str(out), "--readme", str(readme)]
     assert report.main([*argv, "--check"]) == 1, "nothing generated yet"
     assert report.main(argv) == 0
-    assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md",
-                                               "http-endpoints.md", "model-card.md", "training-data.md", "fleet.md"}  # fmt: skip
+    assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md", "http-endpoints.md",
+                                               "model-card.md", "training-data.md", "fleet.md", "device-planning.md"}  # fmt: skip
     assert "| `vgn+turns+clearance` |" in readme.read_text()
     assert "`VGN_TURN_AVERAGE`" in (out / "configuration.md").read_text()
     assert "### `GET /sessions/{session_id}/grasps`" in (out / "http-endpoints.md").read_text()

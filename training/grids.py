@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from service.tsdf import TSDFVolume
 from vgn_data.dataset import DatasetSetup, RawDataset, SceneViews
 from vgn_data.files import atomic_writer
 
@@ -32,8 +31,12 @@ def fuse_grid(views: SceneViews, setup: DatasetSetup, resolution: int, max_depth
 
     The workspace frame is the dataset's world frame (as in VGN): ``views.camera_poses``
     (camera → world) are used as camera → workspace. Depth handling matches the service's
-    ``add_frame``: NaN and inf readings count as no reading.
+    ``add_frame``: NaN and inf readings count as no reading. Open3D is imported here, not at
+    the top, so that training from cached or recipe observations runs where it is not installed
+    (a GPU machine with only torch).
     """
+    from service.tsdf import TSDFVolume
+
     volume = TSDFVolume(setup.size, resolution)
     for depth, camera_pose in zip(views.depth, views.camera_poses, strict=True):
         clean = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
