@@ -45,6 +45,7 @@ from service.runtime import apply_threads, tune_malloc
 # ``service`` (imported above) sets its OpenMP defaults before anything loads torch.
 import torch  # noqa: E402  isort:skip
 
+# Not service.settings.PACKAGED_MODEL: that module needs pydantic-settings, which a GPU machine may lack.
 PACKAGED_MODEL = Path(__file__).resolve().parents[1] / "service" / "models" / "vgn.safetensors"
 
 
