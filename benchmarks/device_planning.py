@@ -38,9 +38,10 @@ import numpy as np
 from benchmarks.report import cpu_model, device_planning_table
 from client.schemas import GraspQuery
 from service.clearance import clear_grasps
-from service.grip import gripping_grasps
+from service.grip import MIN_GRIP_FRAMES, gripping_grasps
 from service.planner import GraspPlanner
 from service.runtime import apply_threads, tune_malloc
+from service.vgn.checkpoint import weights_id
 
 # ``service`` (imported above) sets its OpenMP defaults before anything loads torch.
 import torch  # noqa: E402  isort:skip
@@ -85,6 +86,7 @@ class Request:
         self.surface = volume["surface"]
         self.voxel_size = float(volume["voxel_size"])
         self.pose = volume["workspace_pose"]
+        self.grip = int(volume["frame_count"]) >= MIN_GRIP_FRAMES  # as the service decides
         self.query = GraspQuery()
         self.unlimited = self.query.model_copy(update={"max_grasps": None})  # checks see every grasp
 
@@ -95,13 +97,15 @@ class Request:
         return len(grasps)
 
     def default(self, steps: dict[str, list[float]]) -> int:
-        """What a request that says nothing gets: four turns, clearance and grip checks."""
+        """What a request that says nothing gets: four turns, the clearance check and (from
+        enough frames) the grip check."""
         output = timed(steps, "forward (4 turns)", lambda: self.planner.infer(self.grid, True))
         grasps = timed(steps, "detection (turn-averaged)", lambda: self._detect(output, self.unlimited))
         grasps = timed(steps, "clearance check", lambda: clear_grasps(grasps, self.surface))
-        grasps = timed(
-            steps, "grip check", lambda: gripping_grasps(grasps, self.grid, self.voxel_size, self.pose)
-        )
+        if self.grip:
+            grasps = timed(
+                steps, "grip check", lambda: gripping_grasps(grasps, self.grid, self.voxel_size, self.pose)
+            )
         return len(grasps[: self.query.max_grasps])
 
     def _detect(self, output: Any, query: GraspQuery) -> list[Any]:
@@ -201,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     time_parser.add_argument("--json", type=Path, help="write the figures here")
     args = parser.parse_args(argv)
+    if args.command == "time" and (args.repeats < 1 or args.concurrent < 1):
+        parser.error("--repeats and --concurrent must be >= 1")
     if args.command == "record":
         print(f"recorded {args.out}: {record(args.out)}")
         return 0
@@ -218,6 +224,7 @@ def main(argv: list[str] | None = None) -> int:
                 "torch": torch.__version__,
             },
             "model": args.model.name,
+            "weights_id": weights_id(args.model),
             "runs": runs,
         }
         args.json.parent.mkdir(parents=True, exist_ok=True)

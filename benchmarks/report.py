@@ -364,7 +364,7 @@ def target_row(target: Any) -> str:
 # Planning on a GPU ----------------------------------------------------------------------------
 def device_planning_table(runs: list[dict[str, Any]]) -> str:
     """One row per request, planning step and concurrent run of each device in ``runs``."""
-    lines = ["| device | what | p50 ms | p95 ms | n |", "| --- | --- | --- | ---: | ---: |"]
+    lines = ["| device | what | p50 ms | p95 ms | n |", "| --- | --- | ---: | ---: | ---: |"]
     for run in runs:
         label = f"{run['device']} ({run['device_name']}, {run['precision']}, {run['torch_threads']} threads)"
         for name, row in {**run["requests"], **run["steps"]}.items():
@@ -392,7 +392,7 @@ def device_planning_page(results: Path) -> str:
         parts.append(f"#### `{relative(path.parent, results)}`\n")
         parts.append(
             f"measured on {report.get('date', '?')[:10]}: {devices}, {machine.get('cpus', '?')} CPU cores, "
-            f"torch {machine.get('torch', '?')}; weights `{report.get('model', '?')}`.\n"
+            f"torch {machine.get('torch', '?')}; weights `{report.get('weights_id') or report.get('model', '?')}`.\n"
         )
         parts.append(device_planning_table(report["runs"]))
     return "\n".join(parts)
