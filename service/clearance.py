@@ -17,7 +17,7 @@ y closing axis, origin midway between the finger bases):
   is at z = 50 mm (the finger depth).
 
 Each swept box is tested exactly (slab test of the segment a point traces in the box's frame
-as the hand moves), after a k-d tree has picked the points near each grasp's swept volume.
+as the hand moves), for the points inside the bounding box of the whole swept hand.
 
 Geometry: the caller passes surface points, world frame. The service uses the zero crossings
 of the session's coarse TSDF (``SceneVolume.surface_points``): under 1 ms for a 40³ volume,
@@ -26,10 +26,10 @@ where the fine cloud of ``/cloud`` costs tens to hundreds of milliseconds to fus
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
@@ -48,8 +48,8 @@ FINGER_BOXES = (
     ((0.0, 0.0159, 0.0239), (0.00875, 0.0035, 0.01175), 0.5236),  # web
     ((0.0, 0.0076, 0.04075), (0.01, 0.0076, 0.00925), 0.0),  # rubber pad
 )
-#: (grasp, point) pairs tested at once.
-_CHUNK = 65536
+#: (grasp, point) pairs moved into grasp frames at once (24 MB of float64 coordinates).
+_CHUNK = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -84,10 +84,12 @@ class ClearanceConfig:
             raise ValueError(f"invalid clearance settings {self}")
 
 
+@functools.lru_cache(maxsize=8)
 def hand_boxes(opening: float = MAX_OPENING, margin: float = 0.0) -> tuple[np.ndarray, ...]:
     """The open hand as boxes in the grasp frame: centres (B, 3), rotations (B, 3, 3) box →
     grasp frame and half extents (B, 3) grown by ``margin``. Palm first, then the left
-    (+y) and right (-y) fingers' base, web and pad."""
+    (+y) and right (-y) fingers' base, web and pad. Kept per (opening, margin), read-only:
+    building them costs a quarter of a millisecond, a fifth of a whole check."""
     half_opening = 0.5 * opening
     centres, rotations, halves = [PALM_CENTRE], [np.eye(3)], [PALM_HALF]
     for side in (1.0, -1.0):
@@ -95,11 +97,14 @@ def hand_boxes(opening: float = MAX_OPENING, margin: float = 0.0) -> tuple[np.nd
             centres.append((x, side * (y + half_opening), z))
             rotations.append(Rotation.from_euler("x", side * tilt).as_matrix())
             halves.append(half)
-    return (
+    boxes = (
         np.asarray(centres, dtype=np.float64),
         np.asarray(rotations, dtype=np.float64),
         np.asarray(halves, dtype=np.float64) + margin,
     )
+    for array in boxes:
+        array.setflags(write=False)
+    return boxes
 
 
 def approach_is_clear(
@@ -128,32 +133,26 @@ def approach_is_clear(
         return clear
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
     centres, box_rotations, halves = hand_boxes(config.opening, config.margin)
-    # The swept hand's bounding box (grasp frame), and a ball around it for the k-d tree.
+    # The swept hand's bounding box in the grasp frame: only points inside it are tested per box.
     corners = _box_corners(centres, box_rotations, halves)  # (B, 8, 3) grasp frame
     low = corners.min(axis=(0, 1)) - [0.0, 0.0, config.pregrasp_distance]
     high = corners.max(axis=(0, 1))
-    middle, radius = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
-    ball_centres = positions + rotations @ middle
-    near = cKDTree(points).query_ball_point(ball_centres, radius)
-    counts = np.fromiter((len(n) for n in near), dtype=np.intp, count=len(near))
-    if not counts.sum():
-        return clear
-    grasp = np.repeat(np.arange(len(positions)), counts)
-    point = np.concatenate([np.asarray(n, dtype=np.intp) for n in near])
     direction = box_rotations[:, 2, :]  # the grasp frame's +z in each box's frame, (B, 3)
-    hit = np.zeros(len(grasp), dtype=bool)
-    for chunk in range(0, len(grasp), _CHUNK):  # bounds the memory of many grasps on a big cloud
-        g, p = grasp[chunk : chunk + _CHUNK], point[chunk : chunk + _CHUNK]
-        # Each candidate point in the grasp frame, then in every box's frame.
-        local = np.einsum("pji,pj->pi", rotations[g], points[p] - positions[g])  # (P, 3)
-        bounded = np.flatnonzero(np.all((local >= low) & (local <= high), axis=1))
-        local = local[bounded]  # inside the swept hand's bounding box
-        in_box = np.einsum("bji,pbj->pbi", box_rotations, local[:, None, :] - centres[None])  # (P, B, 3)
+    intruding = np.zeros(len(positions), dtype=np.intp)
+    step = max(1, _CHUNK // len(points))  # grasps per pass: bounds the memory on a big cloud
+    for start in range(0, len(positions), step):
+        rotation, position = rotations[start : start + step], positions[start : start + step]
+        # Every point in every grasp's frame, (G, M, 3): (p - t) R = p R - t R.
+        local = points @ rotation
+        local -= np.einsum("gj,gji->gi", position, rotation)[:, None, :]
+        grasp, point = np.nonzero(np.all((local >= low) & (local <= high), axis=2))
+        if not len(grasp):
+            continue
+        in_box = np.einsum("bji,pbj->pbi", box_rotations, local[grasp, point][:, None, :] - centres[None])
         swept = _segment_hits_box(
             in_box, direction, halves, config.contact_tolerance, config.pregrasp_distance
         )
-        hit[chunk + bounded] = swept.any(axis=1)
-    intruding = np.bincount(grasp[hit], minlength=len(positions))
+        intruding[start : start + step] += np.bincount(grasp[swept.any(axis=1)], minlength=len(position))
     return intruding < config.min_points
 
 

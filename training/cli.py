@@ -231,6 +231,13 @@ def build_parser() -> argparse.ArgumentParser:
         "observations (default %(default)s)",
     )
     run.add_argument(
+        "--teacher-checks",
+        action="store_true",
+        help="the teacher's quality is 0 wherever the service's clearance or grip check would drop "
+        "its grasp, so that one plain pass learns what the default request's checks do (best "
+        "with --teacher-views six: the grip check judges volumes fused from several views)",
+    )
+    run.add_argument(
         "--distill-weight",
         metavar="W",
         type=float,
@@ -343,6 +350,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         distill_weight=args.distill_weight,
         soft_per_draw=args.soft_per_draw,
         teacher_views=args.teacher_views,
+        teacher_checks=args.teacher_checks,
         observations=ObservationSettings(
             per_scene=args.observations,
             original=args.original,

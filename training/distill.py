@@ -9,6 +9,14 @@ voxels with trial labels. The soft labels are moved with the training augmentati
 labels. The averaged quality is the same whichever way the scene is turned; the averaged
 orientation nearly so (it is aligned to the unturned grid's prediction, which matters where the
 four turns disagree).
+
+With ``checks`` the soft labels also carry the service's default checks: where the teacher's
+grasp fails the clearance check (the open hand would touch the observed surface on its way in,
+``service.clearance``) or the grip check (the closing fingers would not meet the surface squarely,
+``service.grip``), its quality target is 0, as the service would drop that grasp. A network
+trained on them can then give in one plain pass what the default request gets from the checks.
+Both checks read only the grid (the clearance check its TSDF zero crossings,
+``service.grid_surface``), so they run on any training scene.
 """
 
 from __future__ import annotations
@@ -21,6 +29,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from service.clearance import approach_is_clear
+from service.grid_surface import grid_surface_points
+from service.grip import measure_grip
 from service.planner import GraspPlanner, InferenceOptions
 from service.vgn.detection import grasp_region
 from training.labels import LabelSet
@@ -55,26 +66,64 @@ class SoftTargets:
         )
 
 
-def soft_targets(teacher: GraspPlanner, grid: np.ndarray) -> SoftTargets:
-    """The teacher's turn-averaged answer for one (N, N, N) grid at its grasp-region voxels."""
+#: Teacher qualities below this are not checked: such grasps stay far under any threshold, and
+#: the checks' cost grows with the number of grasps.
+CHECKED_QUALITY = 0.5
+
+
+def soft_targets(teacher: GraspPlanner, grid: np.ndarray, voxel_size: float | None = None) -> SoftTargets:
+    """The teacher's turn-averaged answer for one (N, N, N) grid at its grasp-region voxels;
+    with ``voxel_size`` (m) quality is 0 where the clearance or grip check fails."""
     output = teacher.infer(grid, turn_average=True)
     region = grasp_region(grid)
     voxel = np.argwhere(region)
     index = tuple(voxel.T)
     rotation = output.rotation_where(region)
+    quaternion = rotation[(slice(None), *index)].T
+    quality = output.quality[index]
+    if voxel_size is not None:
+        quality = np.where(failing_checks(grid, voxel_size, voxel, quaternion, quality), 0.0, quality)
     return SoftTargets(
         voxel=voxel.astype(np.uint8),
-        quality=output.quality[index].astype(np.float16),
-        quaternion=rotation[(slice(None), *index)].T.astype(np.float16),
+        quality=quality.astype(np.float16),
+        quaternion=quaternion.astype(np.float16),
         width=output.width[index].astype(np.float16),
     )
 
 
-def teach(weights: Path, grids: Sequence[object], device: str, progress: bool = True) -> list[SoftTargets]:
+def failing_checks(
+    grid: np.ndarray, voxel_size: float, voxel: np.ndarray, quaternion: np.ndarray, quality: np.ndarray
+) -> np.ndarray:
+    """(K,) bool: which grasps at ``voxel`` (K, 3) with orientations ``quaternion`` (K, 4,
+    workspace frame) the service's clearance or grip check would drop; only those with
+    ``quality`` of at least :data:`CHECKED_QUALITY` are checked."""
+    failing = np.zeros(len(voxel), dtype=bool)
+    checked = np.flatnonzero(quality >= CHECKED_QUALITY)
+    if not len(checked):
+        return failing
+    positions = voxel[checked] * voxel_size  # grasp positions sit at index x voxel (docs/conventions.md)
+    orientations = quaternion[checked].astype(np.float64)
+    clear = approach_is_clear(grid_surface_points(grid, voxel_size), positions, orientations)
+    grips = measure_grip(grid, voxel_size, positions, orientations).passes()
+    failing[checked] = ~(clear & grips)
+    return failing
+
+
+def teach(
+    weights: Path,
+    grids: Sequence[object],
+    device: str,
+    progress: bool = True,
+    voxel_sizes: Sequence[float] | None = None,
+) -> list[SoftTargets]:
     """Soft targets of every scene from the weights at ``weights``, run as the service runs them
-    (the fast form, in float32); ``grids`` are sources with ``load() -> (N, N, N) array``."""
+    (the fast form, in float32); ``grids`` are sources with ``load() -> (N, N, N) array``. With
+    ``voxel_sizes`` (one per grid) the targets carry the clearance and grip checks."""
     teacher = GraspPlanner.from_path(
         weights, device, InferenceOptions(precision="float32", batch_window_ms=0.0)
     )
     bar = tqdm(grids, desc="teacher", unit="scene", disable=not progress, leave=False)
-    return [soft_targets(teacher, source.load()) for source in bar]
+    sizes = [None] * len(grids) if voxel_sizes is None else list(voxel_sizes)
+    if len(sizes) != len(grids):
+        raise ValueError(f"{len(grids)} grids but {len(sizes)} voxel sizes")
+    return [soft_targets(teacher, source.load(), size) for source, size in zip(bar, sizes, strict=True)]

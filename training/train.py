@@ -49,7 +49,7 @@ from training.dataset import (
     split_scenes,
     subsample_scenes,
 )
-from training.distill import SoftTargets, teach
+from training.distill import CHECKED_QUALITY, SoftTargets, teach
 from training.grids import MAX_DEPTH, RESOLUTION
 from training.loss import distillation_loss, gather, per_label_loss
 from training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
@@ -114,6 +114,9 @@ class TrainConfig:
     #: a clean rendering from VGN's six evaluation views (``TEACHER_SIX_VIEWS``), a view of the
     #: scene no stored grid holds, whatever the student is shown
     teacher_views: str = "original"
+    #: the teacher's quality is 0 where the service's clearance or grip check fails
+    #: (``training.distill.failing_checks``)
+    teacher_checks: bool = False
     #: observations of recipe folders: how many per scene are rendered and how they are drawn
     observations: ObservationSettings = field(default_factory=ObservationSettings)
     resume: bool = False
@@ -153,6 +156,8 @@ class TrainConfig:
             raise TrainingError(f"--teacher-views must be one of {TEACHER_VIEWS}, got {self.teacher_views!r}")
         if self.teacher_views != "original" and self.teacher is None:
             raise TrainingError("--teacher-views needs --teacher")
+        if self.teacher_checks and self.teacher is None:
+            raise TrainingError("--teacher-checks needs --teacher")
 
 
 @dataclass
@@ -376,7 +381,8 @@ def _teacher_targets(
         else _six_view_sources(config, scenes)
     )
     try:
-        soft = teach(Path(config.teacher), sources, str(device), config.progress)
+        sizes = [scene.voxel_size for scene in scenes] if config.teacher_checks else None
+        soft = teach(Path(config.teacher), sources, str(device), config.progress, sizes)
     except CheckpointError as error:
         raise TrainingError(f"--teacher: {error}") from None
     log(
@@ -445,6 +451,8 @@ def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
         identity["teacher"] = weights_id(Path(config.teacher))
     if config.teacher_views != "original":  # absent otherwise, so earlier checkpoints still resume
         identity["teacher_views"] = config.teacher_views
+    if config.teacher_checks:  # the same
+        identity["teacher_checks"] = True
     if config.observations != ObservationSettings():  # the same: absent for the default
         identity["observations"] = config.observations.key()
     return identity
@@ -548,6 +556,10 @@ def _training_settings(
             "teacher_views": "each scene's first observation (the original one unless --no-original)"
             if config.teacher_views == "original"
             else "each scene rendered clean from VGN's six evaluation views",
+            "checks": "quality 0 where the clearance or grip check fails (teacher quality >= "
+            f"{CHECKED_QUALITY})"
+            if config.teacher_checks
+            else None,
         },
         "observations": asdict(config.observations)
         if any(isinstance(s.source, RenderedObservations) for s in train_scenes)

@@ -11,6 +11,10 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
+from client.schemas import Grasp
+from service.clearance import clear_grasps
+from service.grid_surface import grid_surface_points
+from service.grip import gripping_grasps
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.vgn.checkpoint import card_path, save_vgn, weights_id
@@ -20,7 +24,7 @@ from tests.helpers.grids import recorded_grids
 from training.augment import Placement
 from training.cli import main
 from training.dataset import Sample, SceneDataset, collate, load_scenes
-from training.distill import SoftTargets, soft_targets
+from training.distill import CHECKED_QUALITY, SoftTargets, failing_checks, soft_targets
 from training.grids import MAX_DEPTH, RESOLUTION
 from training.labels import LabelSet
 from training.loss import distillation_loss
@@ -91,6 +95,38 @@ def test_soft_labels_cover_the_grasp_region_and_draws_are_subsets(teacher: Grasp
     assert len(draw) == 100 and len(set(map(tuple, draw.voxel.tolist()))) == 100
     assert torch.allclose(draw.quaternion.norm(dim=-1), torch.ones(100), atol=1e-6)
     assert len(targets.draw(10**6, np.random.default_rng(1))) == len(targets)
+
+
+def test_checked_soft_labels_are_zero_exactly_where_the_services_checks_drop_the_grasp(teacher: GraspPlanner):
+    """With the checks, a teacher grasp the service would drop (clearance or grip) teaches
+    quality 0; every other soft label is the teacher's answer unchanged."""
+    _, grid = recorded_grids()[0]
+    plain, checked = soft_targets(teacher, grid), soft_targets(teacher, grid, VOXEL)
+    np.testing.assert_array_equal(checked.voxel, plain.voxel)
+    np.testing.assert_array_equal(checked.quaternion, plain.quaternion)
+    zeroed = (checked.quality == 0) & (plain.quality > 0)
+    assert np.all(checked.quality[~zeroed] == plain.quality[~zeroed])
+    assert np.all(plain.quality[zeroed] >= CHECKED_QUALITY)
+    strong = plain.quality >= CHECKED_QUALITY
+    assert 0 < zeroed.sum() < strong.sum(), "the checks drop some of the teacher's grasps, not all"
+
+    # The same verdicts as the service's checks on those grasps as world-frame Grasps (the
+    # workspace at the world origin), including the clearance check's surface points.
+    rows = np.flatnonzero(strong)[::7]
+    quaternion = plain.quaternion[rows].astype(np.float64)
+    quaternion /= np.linalg.norm(quaternion, axis=1, keepdims=True)
+    grasps = [
+        Grasp(position=(v * VOXEL).tolist(), orientation=q.tolist(), approach=[0.0, 0.0, 1.0], width=0.04, quality=0.9)
+        for v, q in zip(plain.voxel[rows].astype(np.float64), quaternion, strict=True)
+    ]  # fmt: skip
+    kept = gripping_grasps(clear_grasps(grasps, grid_surface_points(grid, VOXEL)), grid, VOXEL, np.eye(4))
+    kept_rows = {tuple(g.position) for g in kept}
+    service_drops = np.array([tuple(g.position) not in kept_rows for g in grasps])
+    quality = np.ones(len(rows))
+    np.testing.assert_array_equal(
+        failing_checks(grid, VOXEL, plain.voxel[rows].astype(np.int64), quaternion, quality), service_drops
+    )
+    assert 0 < service_drops.sum() < len(rows)
 
 
 def one_voxel_targets(voxel, quaternion, quality=0.7, width=4.0) -> SoftTargets:
@@ -190,6 +226,8 @@ def test_a_run_with_a_teacher_records_it_and_resumes_only_with_it(raw: RawDatase
     assert "--teacher" in capsys.readouterr().err
     assert main([*args, "--epochs", "1", "--teacher", str(weights), "--soft-per-draw", "0"]) == 2
     assert "--soft-per-draw" in capsys.readouterr().err
+    assert main([*args, "--epochs", "1", "--teacher-checks"]) == 2
+    assert "--teacher-checks needs --teacher" in capsys.readouterr().err
 
     assert main([*args, "--epochs", "1", "--teacher", str(weights), "--soft-per-draw", "64"]) == 0
     card = json.loads(card_path(out).read_text())
@@ -207,3 +245,17 @@ def test_a_run_with_a_teacher_records_it_and_resumes_only_with_it(raw: RawDatase
     assert main([*args, "--epochs", "2", "--resume", "--teacher", str(other)]) == 2
     assert "teacher" in capsys.readouterr().err
     assert main([*args, "--epochs", "2", "--resume", "--teacher", str(weights), "--soft-per-draw", "64"]) == 0
+    # The checks change the targets: a run without them does not resume with them.
+    checked = [*args, "--epochs", "3", "--resume", "--teacher", str(weights), "--soft-per-draw", "64"]
+    assert main([*checked, "--teacher-checks"]) == 2
+    assert "teacher_checks" in capsys.readouterr().err
+
+
+def test_a_run_with_checked_targets_records_them(raw: RawDataset, tmp_path: Path):
+    out = tmp_path / "student" / "vgn.safetensors"
+    args = ["--data", str(raw.root), "--out", str(out), "--cache", str(tmp_path / "cache"), "--no-progress"]
+    args += ["--batch-scenes", "2", "--val-fraction", "0.25", "--threads", "1", "--threshold", "0.8"]
+    args += ["--epochs", "1", "--teacher", str(PACKAGED_MODEL), "--soft-per-draw", "64", "--teacher-checks"]
+    assert main(args) == 0
+    distillation = json.loads(card_path(out).read_text())["training"]["distillation"]
+    assert distillation["checks"].startswith("quality 0 where the clearance or grip check fails")
