@@ -1,9 +1,11 @@
 """Fusing queued frames into sessions' cloud volumes off the request path.
 
 Open3D holds the GIL for the whole of a fine (120³) integration (~25 ms), so fusing while
-frames stream in stalls every request of the process, whichever thread does it. One shared
-worker therefore fuses queued frames only once no frame has arrived in the process for
-``idle_s``, or at once for a queue an upload waits on (full). And it spends the CPU only on
+frames stream in or grasps are planned stalls every request of the process, whichever thread
+does it (a grasp request that meets one takes about 1.6x as long). One shared worker therefore
+fuses queued frames only in a lull: no frame has arrived and no planning has run in the process
+for ``idle_s`` (the service wraps planning in :meth:`CloudFusion.planning`), or at once for a
+queue an upload waits on (full). And it spends the CPU only on
 clouds likely to be read: a session whose cloud was read before, or whose queue is past a
 quarter of its bound; the rest wait for a cloud read (most sessions only ask for grasps).
 
@@ -13,9 +15,11 @@ built per test or per request leaves no thread behind) and on ``close``.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from typing import Protocol
 
 logger = logging.getLogger(__name__)
@@ -52,6 +56,8 @@ class CloudFusion:
         self._queues: set[FusionQueue] = set()
         self._queued_bytes = 0
         self._last_frame_at = 0.0
+        self._last_planning_at = 0.0
+        self._planning = 0  # plans running now
         self._bytes_lock = threading.Lock()  # apart from _wake: volumes account holding their own lock
         self._wake = threading.Condition()
         self._thread: threading.Thread | None = None
@@ -71,6 +77,19 @@ class CloudFusion:
                 self._thread = threading.Thread(target=self._run, name="cloud-fusion", daemon=True)
                 self._thread.start()
             self._wake.notify()
+
+    @contextlib.contextmanager
+    def planning(self) -> Iterator[None]:
+        """Mark grasp planning as running: no fusion starts during it, nor for ``idle_s``
+        after it (one already running finishes its frame)."""
+        with self._wake:
+            self._planning += 1
+        try:
+            yield
+        finally:
+            with self._wake:
+                self._planning -= 1
+                self._last_planning_at = time.monotonic()
 
     def forget(self, queue: FusionQueue) -> None:
         """Stop fusing ``queue`` (its volume closed); frames it still holds are its own to drop."""
@@ -115,7 +134,10 @@ class CloudFusion:
         ``linger_s`` with nothing queued. Call with ``_wake`` held."""
         idle_since = time.monotonic()
         while not self.closed:
-            lull = self._last_frame_at + self.idle_s - time.monotonic()
+            last_activity = max(self._last_frame_at, self._last_planning_at)
+            lull = last_activity + self.idle_s - time.monotonic()
+            if self._planning:
+                lull = max(lull, self.idle_s)  # looked at again once it may be over
             in_lull = None
             for queue in list(self._queues):
                 worth, now = queue.fusion_wanted()

@@ -196,7 +196,12 @@ class PlanningService:
         """Ranked grasps (world frame, best first) on the session's fused volume, by VGN or,
         with ``planner="antipodal"``, by the geometric baseline on its cloud (no model needed).
         Options the query leaves unset (turn averaging, the clearance and grip checks) take the operator's
-        defaults, so a plain request gets the service's best answer."""
+        defaults, so a plain request gets the service's best answer. No queued cloud frame
+        starts fusing meanwhile (it would hold the GIL for tens of milliseconds)."""
+        with self.sessions.cloud_fusion.planning():
+            return self._plan(session_id, query)
+
+    def _plan(self, session_id: str, query: GraspQuery) -> GraspResult:
         self.sessions.info(session_id)  # an unknown session is a 404 whatever the model
         baseline = query.planner == "antipodal"
         turn_average = None

@@ -241,19 +241,21 @@ class GraspPlanner:
             # The calling thread runs the first part itself: it is awake and its caches are
             # warm, while each hand-off to an idle lane costs a wake-up.
             first, *others = np.array_split(grids, lanes)
-            pending = [self._lane_pool.submit(self._forward_tensors, part) for part in others]
-            parts = [self._forward_tensors(first), *(future.result() for future in pending)]
+            pending = [self._lane_pool.submit(self._forward_part, part) for part in others]
+            parts = [self._forward_part(first), *(future.result() for future in pending)]
         else:
-            parts = [self._forward_tensors(grids)]
-        outputs = []
-        for quality, rotation, width in parts:
-            if len(quality) == 1:
-                outputs.append(NetworkOutput(quality[0, 0], rotation[0], width[0, 0]))
-                continue
-            # Copies, so that an output a session keeps does not hold on to the whole batch.
-            outputs += [NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
-                        for b in range(len(quality))]  # fmt: skip
-        return outputs
+            parts = [self._forward_part(grids)]
+        return [output for part in parts for output in part]
+
+    def _forward_part(self, grids: np.ndarray) -> list[NetworkOutput]:
+        """The outputs of one forward pass over (B, N, N, N) grids, one per grid. Each lane
+        splits its own part, so the copies below run side by side too."""
+        quality, rotation, width = self._forward_tensors(grids)
+        if len(quality) == 1:
+            return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
+        # Copies, so that an output a session keeps does not hold on to the whole batch.
+        return [NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
+                for b in range(len(quality))]  # fmt: skip
 
     def _forward_tensors(self, grids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Quality, rotation and width arrays of one forward pass over (B, N, N, N) grids."""

@@ -116,6 +116,21 @@ def test_no_fusion_while_frames_keep_arriving():
     wait_until(lambda: scene.pending == 0)
 
 
+def test_no_fusion_starts_while_grasps_are_planned_nor_right_after():
+    """A fine fusion holds the GIL for tens of milliseconds: planning counts as activity, so a
+    queue that is due waits for the plan to end and for a lull after it."""
+    fusion = CloudFusion(idle_s=0.3)
+    scene = volume(fusion)
+    scene.cloud()
+    with fusion.planning():
+        scene.integrate(DEPTHS[0], INTRINSICS, VIEWS[0], 2.0)
+        time.sleep(0.6)  # twice the lull after the frame: due, but a plan runs
+        assert scene.pending == 1
+    ended = time.monotonic()
+    wait_until(lambda: scene.pending == 0)
+    assert time.monotonic() - ended >= 0.3, "fused before a lull after the plan"
+
+
 def test_reset_while_the_worker_fuses_keeps_no_stale_frame():
     fusion = CloudFusion(idle_s=0.0)
     scene = volume(fusion)
