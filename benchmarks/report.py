@@ -699,33 +699,37 @@ def training_data_page(manifest: dict[str, Any], results: Path) -> str:
 
 
 def paired_comparison(results: Path) -> list[str]:
-    """The paired comparison of training observations, from the clutter result folders named
-    ``paired-<arm>`` (one setting each, e.g. ``paired-fresh-noise``): a row per arm, a column per
-    scenario and sensor setting."""
+    """The paired comparisons of training observations, from the clutter result folders named
+    ``paired-<arm>`` (one setting each, e.g. ``paired-fresh-noise``, ``paired-six-fresh-default-noise``):
+    a row per arm and request (the planner the runs asked for: ``vgn`` plain, or the service's
+    default with its options), a column per scenario and sensor setting."""
     runs = [(folder, rows) for folder, rows in clutter_runs(results) if folder.name.startswith("paired-")]
     if not runs:
         return []
-    arms: list[str] = []
+    arms: list[tuple[str, str]] = []
     columns: list[str] = []
-    cells: dict[tuple[str, str], str] = {}
-    measured: dict[str, str] = {}
+    cells: dict[tuple[tuple[str, str], str], str] = {}
+    measured: dict[tuple[str, str], str] = {}
     for folder, rows in runs:
-        arm = folder.name.removeprefix("paired-").removesuffix("-noise")
-        arms += [arm] if arm not in arms else []
+        name = folder.name.removeprefix("paired-").removesuffix("-noise").removesuffix("-default")
         for row in rows:
+            arm = (name, row["planner"])
+            arms += [arm] if arm not in arms else []
             column = scenario_label(folder, row)
             columns += [column] if column not in columns else []
             cells[arm, column] = (
                 f"{pct(row['success_rate'], row.get('success_rate_ci95'))}, {row['rounds']} rounds"
             )
             measured[arm] = machine_text(row_measured(row, folder))
-    lines = ["", "Paired comparison: the same scenes, seeds and training recipe, success % (95 % interval) on "
+    lines = ["", "Paired comparisons: the same scenes, seeds and training recipe, success % (95 % interval) on "
              "objects never trained on, random selection:", "",
-             "| training observations | " + " | ".join(columns) + " | measured |",
-             "| --- |" + " --- |" * (len(columns) + 1)]  # fmt: skip
+             "| training observations | request | " + " | ".join(columns) + " | measured |",
+             "| --- | --- |" + " --- |" * (len(columns) + 1)]  # fmt: skip
     for arm in arms:
         lines.append(
-            f"| {arm} | " + " | ".join(cells.get((arm, c), "-") for c in columns) + f" | {measured[arm]} |"
+            f"| {arm[0]} | `{arm[1]}` | "
+            + " | ".join(cells.get((arm, c), "-") for c in columns)
+            + f" | {measured[arm]} |"
         )
     return lines
 

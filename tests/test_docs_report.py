@@ -163,10 +163,21 @@ def test_paired_comparison_rows_per_arm_and_columns_per_setting(tmp_path: Path):
                 json.dumps([{**ROW, "success_rate": rate + (0 if suffix else 20)}])
             )
             (folder / "table.md").write_text(f"{settings}\n\n| planner | ... |\n")
+    plain = tmp_path / "paired-fixed-default"  # the same arm asked with another request: its own row
+    plain.mkdir()
+    (plain / "table.json").write_text(json.dumps([{**ROW, "planner": "vgn", "success_rate": 30.0}]))
+    (plain / "table.md").write_text("seed 1, rounds per scenario 100, six view(s)\n\n| planner | ... |\n")
     header, _, *rows = [line for line in report.paired_comparison(tmp_path) if line.startswith("| ")]
-    assert header == "| training observations | pile-5 | pile-5, depth noise | measured |"
-    assert rows[0].startswith("| fixed | 45.7 (51.2-61.1), 100 rounds | 25.7 (51.2-61.1), 100 rounds |")
-    assert rows[1].startswith("| fresh | 60.0") and "2031-02-03" in rows[1] and len(rows) == 2
+    assert header == "| training observations | request | pile-5 | pile-5, depth noise | measured |"
+    assert rows[0].startswith(
+        "| fixed | `vgn+turns+clearance` | 45.7 (51.2-61.1), 100 rounds | 25.7 (51.2-61.1), 100 rounds |"
+    )
+    assert rows[1].startswith("| fixed | `vgn` | 30.0 (51.2-61.1), 100 rounds | - |")
+    assert (
+        rows[2].startswith("| fresh | `vgn+turns+clearance` | 60.0")
+        and "2031-02-03" in rows[2]
+        and len(rows) == 3
+    )
 
 
 def test_runs_under_other_sensors_get_their_own_rows(tmp_path: Path, monkeypatch):
