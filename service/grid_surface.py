@@ -6,8 +6,9 @@ keeps ``(tsdf + 1) / 2`` of every observed voxel (0 elsewhere, docs/conventions.
 points follow from the grid alone: between two observed neighbours along an axis whose TSDF
 values differ in sign, the point where the linear interpolation of the two is zero. This is
 the rule Open3D's ``UniformTSDFVolume.extract_point_cloud`` applies (voxel values at voxel
-centres, ``(index + 0.5) * voxel_size``; it skips the grid's outermost layer of voxels), so a teacher's checks during training see the
-geometry the service's checks see (a test compares the two).
+centres, ``(index + 0.5) * voxel_size``; the grid's outermost layer of voxels is skipped), so a
+teacher's checks during training see the geometry the service's checks see (a test compares
+the two).
 """
 
 from __future__ import annotations
