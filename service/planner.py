@@ -16,14 +16,23 @@ from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD, G
 from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.runtime import usable_cores
-from service.vgn.batching import MicroBatcher
+from service.vgn.batching import DEFAULT_KIND, MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, grasp_scores, grasps_from_scores
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
-from service.vgn.turns import average_turned_quality, average_turned_rotation, turned_grids
+from service.vgn.turns import RotationField, average_turned_quality, average_turned_rotation, turned_grids
 
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
+
+#: Kinds of grid a forward pass carries: every output, or quality alone with orientations
+#: computed later where they are read (the turned grids of a turn-averaged request: their
+#: widths are never used and their orientations are read at a few hundred voxels).
+ALL_OUTPUTS, QUALITY_ONLY = DEFAULT_KIND, "quality"
+
+#: Above this many voxels a :class:`RotationsOnDemand` computes the whole rotation head once
+#: instead of voxel by voxel (which gathers a 432-value neighbourhood per voxel).
+WHOLE_HEAD_VOXELS = 4096
 
 
 def resolved_threshold(query: GraspQuery, default: float) -> float:
@@ -111,19 +120,51 @@ class InferenceOptions:
     lanes: int | None = None
 
 
+class RotationsOnDemand:
+    """One grid's orientations, computed from its decoder features where they are read.
+
+    Why: a turn-averaged request reads the turned grids' orientations at the few hundred
+    voxels detection keeps; the rotation head over all N³ voxels, and interleaving its output,
+    cost more than the rest of those grids' heads together."""
+
+    def __init__(self, network: FastVGN, features: torch.Tensor) -> None:
+        self._network = network
+        self._features = features  # (16, N/2, N/2, N/2), the grid's own copy
+        self._padded = network.padded_features(features)
+        self._whole: np.ndarray | None = None
+
+    def at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(4, M) unit quaternions at the M voxels (i, j, depth)."""
+        if self._whole is None and len(i) > WHOLE_HEAD_VOXELS:
+            with torch.inference_mode():
+                self._whole = self._network.rotation_from(self._features[None])[0].cpu().numpy()
+        if self._whole is not None:
+            return self._whole[:, i, j, depth]
+        return self._network.rotation_at(self._padded, np.stack([i, j, depth], axis=1))
+
+
+@dataclass
+class QualityOutput:
+    """The output of a grid run for quality alone: quality (N³) and orientations on demand."""
+
+    quality: np.ndarray
+    rotation: RotationsOnDemand
+
+
 @dataclass
 class NetworkOutput:
     """Voxel-wise network output as numpy: quality (N³), rotation (4, N³), width (N³ voxels).
 
-    A turn-averaged output also keeps the four turns' rotations (``turned_rotations``, 4 MB for
-    a 40³ grid) and averages them only where asked (:meth:`rotation_where`): a request reads
-    the orientation of a few hundred voxels, and averaging all 64,000 would cost more than
-    the rest of the averaging together."""
+    A turn-averaged output also keeps the four turns' rotations (``turned_rotations``: the
+    unturned grid's array, the turned grids' computed on demand when the network allows) and
+    averages them only where asked (:meth:`rotation_where`): a request reads the orientation
+    of a few hundred voxels, and averaging all 64,000 would cost more than the rest of the
+    averaging together."""
 
     quality: np.ndarray
     rotation: np.ndarray
     width: np.ndarray
-    turned_rotations: tuple[np.ndarray, ...] | None = None
+    turned_rotations: tuple[RotationField, ...] | None = None
 
     def rotation_where(self, where: np.ndarray | None = None) -> np.ndarray:
         """Orientations (4, N³): turn-averaged at the voxels ``where`` marks (all voxels when
@@ -227,42 +268,52 @@ class GraspPlanner:
         grid = np.ascontiguousarray(grid, dtype=np.float32)
         if not turn_average:
             return self._batcher.run(grid)
-        outputs = self._batcher.run_many(list(turned_grids(grid)))  # rows of one stacked array: contiguous
+        turned_kind = QUALITY_ONLY if isinstance(self._network, FastVGN) else ALL_OUTPUTS
+        grids = list(turned_grids(grid))  # rows of one stacked array: contiguous
+        outputs = self._batcher.run_many(grids, [ALL_OUTPUTS] + [turned_kind] * (len(grids) - 1))
         quality = average_turned_quality([output.quality for output in outputs])
         rotations = tuple(output.rotation for output in outputs)
         return NetworkOutput(quality, outputs[0].rotation, outputs[0].width, turned_rotations=rotations)
 
-    def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:
-        """One forward pass over (B, N, N, N) grids, split into up to ``lanes`` parts that run
-        side by side (see :func:`default_lanes`)."""
+    def _forward_batch(self, grids: np.ndarray, kinds: list[str]) -> list[NetworkOutput | QualityOutput]:
+        """One forward pass over (B, N, N, N) grids of the given ``kinds``, split into up to
+        ``lanes`` parts that run side by side (see :func:`default_lanes`)."""
         assert self._network is not None
         lanes = min(len(grids), self.lanes)
         if lanes > 1 and self._lane_pool is not None:
             # The calling thread runs the first part itself: it is awake and its caches are
             # warm, while each hand-off to an idle lane costs a wake-up.
-            first, *others = np.array_split(grids, lanes)
-            pending = [self._lane_pool.submit(self._forward_part, part) for part in others]
-            parts = [self._forward_part(first), *(future.result() for future in pending)]
+            ends = np.cumsum([len(part) for part in np.array_split(grids, lanes)])
+            (first, first_kinds), *others = [
+                (grids[start:end], kinds[start:end]) for start, end in zip([0, *ends[:-1]], ends, strict=True)
+            ]
+            pending = [self._lane_pool.submit(self._forward_part, *part) for part in others]
+            parts = [self._forward_part(first, first_kinds), *(future.result() for future in pending)]
         else:
-            parts = [self._forward_part(grids)]
+            parts = [self._forward_part(grids, kinds)]
         return [output for part in parts for output in part]
 
-    def _forward_part(self, grids: np.ndarray) -> list[NetworkOutput]:
-        """The outputs of one forward pass over (B, N, N, N) grids, one per grid. Each lane
-        splits its own part, so the copies below run side by side too."""
-        quality, rotation, width = self._forward_tensors(grids)
-        if len(quality) == 1:
-            return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
-        # Copies, so that an output a session keeps does not hold on to the whole batch.
-        return [NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
-                for b in range(len(quality))]  # fmt: skip
-
-    def _forward_tensors(self, grids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Quality, rotation and width arrays of one forward pass over (B, N, N, N) grids."""
+    def _forward_part(self, grids: np.ndarray, kinds: list[str]) -> list[NetworkOutput | QualityOutput]:
+        """The outputs of one forward pass over (B, N, N, N) grids, one per grid, each of its
+        kind. Each lane splits its own part, so the copies below run side by side too."""
         tensor = torch.from_numpy(np.ascontiguousarray(grids))[:, None].to(self.device)
+        network = self._network
         with torch.inference_mode():
-            quality, rotation, width = (t.cpu().numpy() for t in self._network(tensor))
-        return quality, rotation, width
+            if not isinstance(network, FastVGN):
+                return _network_outputs(network(tensor))
+            features = network.features(tensor)
+            full = [b for b, kind in enumerate(kinds) if kind != QUALITY_ONLY]
+            partial = [b for b, kind in enumerate(kinds) if kind == QUALITY_ONLY]
+            outputs: dict[int, NetworkOutput | QualityOutput] = {}
+            if full:
+                chosen = features if len(full) == len(kinds) else features[full]
+                outputs.update(zip(full, _network_outputs(network.outputs_from(chosen)), strict=True))
+            if partial:
+                quality = network.quality_from(features[partial]).cpu().numpy()
+                for row, b in enumerate(partial):
+                    rotations = RotationsOnDemand(network, features[b].clone())
+                    outputs[b] = QualityOutput(quality[row, 0].copy(), rotations)
+        return [outputs[b] for b in range(len(kinds))]
 
     def plan(
         self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery
@@ -286,3 +337,13 @@ class GraspPlanner:
         score = grasp_scores(grid, output.quality, output.width, voxel_size, config)
         rotation = output.rotation_where(score > 0)  # the only voxels detection reads
         return grasps_from_scores(score, rotation, output.width, voxel_size, workspace_pose, config)
+
+
+def _network_outputs(tensors: tuple[torch.Tensor, torch.Tensor, torch.Tensor]) -> list[NetworkOutput]:
+    """One :class:`NetworkOutput` per grid of a batch's quality, rotation and width tensors."""
+    quality, rotation, width = (t.cpu().numpy() for t in tensors)
+    if len(quality) == 1:
+        return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
+    # Copies, so that an output a session keeps does not hold on to the whole batch.
+    return [NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
+            for b in range(len(quality))]  # fmt: skip

@@ -14,8 +14,29 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
+
+
+class RotationReader(Protocol):
+    """Orientations of one grid that are computed where they are read, not stored whole."""
+
+    def at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(4, M) unit quaternions ``[x, y, z, w]`` at the M voxels (i, j, depth)."""
+        ...
+
+
+#: One grid's orientations: a (4, N, N, N) array, or a reader that computes them on demand.
+RotationField = np.ndarray | RotationReader
+
+
+def rotations_at(field: RotationField, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """(4, M) orientations of ``field`` at the M voxels (i, j, depth)."""
+    if isinstance(field, np.ndarray):
+        return field[:, i, j, depth]
+    return field.at(i, j, depth)
+
 
 #: Quarter turns about +z whose network outputs are averaged: 0°, 90°, 180°, 270°.
 TURNS = (0, 1, 2, 3)
@@ -67,9 +88,12 @@ def average_turned_quality(qualities: Sequence[np.ndarray]) -> np.ndarray:
     return (total / count).astype(first.dtype)
 
 
-def average_turned_rotation(rotations: Sequence[np.ndarray], where: np.ndarray | None = None) -> np.ndarray:
+def average_turned_rotation(
+    rotations: Sequence[RotationField], where: np.ndarray | None = None
+) -> np.ndarray:
     """(4, N, N, N) mean grasp orientation, in the unturned grid's frame and voxels, of the
-    four (4, N, N, N) network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`.
+    four network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`: the
+    unturned grid's as an array, the turned grids' as arrays or read on demand.
 
     Each turn's quaternion is read at the turned grasp position and turned back about z. A
     quaternion and its negative are one rotation, and a grasp turned by π about its approach is
@@ -80,6 +104,8 @@ def average_turned_rotation(rotations: Sequence[np.ndarray], where: np.ndarray |
     reads: elsewhere the result is the unturned grid's prediction.
     """
     reference = rotations[0]
+    if not isinstance(reference, np.ndarray):
+        raise TypeError("the unturned grid's rotations must be an array")
     n = reference.shape[-1]
     i, j, depth = np.nonzero(np.ones(reference.shape[1:], dtype=bool) if where is None else where)
     chosen_reference = reference[:, i, j, depth]
@@ -88,7 +114,7 @@ def average_turned_rotation(rotations: Sequence[np.ndarray], where: np.ndarray |
         turned_i, turned_j = (index[i, j] for index in turned_index(n, k))
         on_grid = (turned_i >= 0) & (turned_i < n) & (turned_j >= 0) & (turned_j < n)
         turned = np.zeros_like(chosen_reference)
-        turned[:, on_grid] = field[:, turned_i[on_grid], turned_j[on_grid], depth[on_grid]]
+        turned[:, on_grid] = rotations_at(field, turned_i[on_grid], turned_j[on_grid], depth[on_grid])
         total += _aligned_back(turned, chosen_reference, k)
     averaged = reference.copy()
     averaged[:, i, j, depth] = total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)

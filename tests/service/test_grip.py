@@ -180,7 +180,9 @@ def test_a_volume_of_one_frame_is_not_checked(trained):
     assert one.grip_dropped is None
     assert one.grasps == trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=False)).grasps
     trained.add_frame(session, BoxScene().depth(second), second)
-    assert trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True)).grip_dropped is not None
+    assert (
+        trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True)).grip_dropped is not None
+    )
 
 
 def test_the_option_over_http_and_grpc(trained):

@@ -78,7 +78,7 @@ def test_the_grids_are_turned_about_z():
 def test_a_request_queues_its_grids_together_and_gets_them_back_in_order():
     sizes = []
 
-    def forward(grids: np.ndarray) -> list[float]:
+    def forward(grids: np.ndarray, kinds: list[str]) -> list[float]:
         sizes.append(len(grids))
         return [float(g.sum()) for g in grids]
 
@@ -112,6 +112,14 @@ def test_the_planner_averages_the_shipped_models_outputs_over_the_turns():
     some = averaged.rotation_where(region)
     np.testing.assert_allclose(some[:, region], average_turned_rotation(rotations)[:, region], atol=1e-4)
     np.testing.assert_allclose(some[:, ~region], plain.rotation[:, ~region], atol=1e-4)
+    # A few hundred voxels, as detection asks for: the turned grids' orientations are then
+    # computed at those voxels alone, with the same result.
+    few = np.zeros_like(region)
+    few[tuple(np.argwhere(region)[::40].T)] = True
+    assert 0 < few.sum() < 1000
+    np.testing.assert_allclose(
+        averaged.rotation_where(few)[:, few], average_turned_rotation(rotations)[:, few], atol=1e-4
+    )
     assert plain.rotation_where(region) is plain.rotation
     # Widths are the unturned grid's (from a batch of four: float32 rounding apart).
     np.testing.assert_allclose(averaged.width, plain.width, atol=1e-4)
