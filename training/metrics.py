@@ -29,6 +29,7 @@ CURVE_THRESHOLDS = (0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9, 0.95)
 #: Metric names in display order, with a short column title and format.
 COLUMNS: dict[str, tuple[str, str]] = {
     "loss": ("loss", "{:.4f}"),
+    "balanced_loss": ("bal loss", "{:.4f}"),  # what picks the best epoch
     "accuracy": ("acc", "{:.3f}"),
     "precision": ("prec", "{:.3f}"),
     "recall": ("recall", "{:.3f}"),

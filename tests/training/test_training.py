@@ -22,6 +22,7 @@ from service.planner import GraspPlanner
 from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
 from tests.helpers.datasets import SMALL, TOP_DOWN, VOXEL, N, make_dataset
+from training import report
 from training.augment import random_augment, rotate_z, shift_z
 from training.checkpoint import checkpoint_path
 from training.cli import build_parser, config_from_args, main
@@ -361,6 +362,19 @@ def test_metrics_count_at_threshold_and_measure_errors():
     losses = per_label_loss(predictions, batch)
     assert result["balanced_loss"] == pytest.approx(0.5 * (float(losses[:2].mean()) + float(losses[2])))
     assert MetricAccumulator().result()["precision"] is None
+
+
+def test_the_progress_table_shows_the_loss_that_picks_the_best_epoch():
+    """The best epoch is the one of least balanced validation loss: the table prints it."""
+    entry = {
+        "epoch": 2,
+        "train": {"loss": 0.31},
+        "val": {"loss": 0.2609, "balanced_loss": 0.4432},
+        "seconds": 12.0,
+    }
+    titles, line = report.header(validation=True).split(), report.row(entry).split()
+    assert "bal" in titles and "0.4432" in line and "0.2609" in line
+    assert line.index("0.4432") == line.index("0.2609") + 1
 
 
 def test_the_operating_threshold_is_chosen_on_the_real_mix():
