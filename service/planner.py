@@ -16,22 +16,17 @@ from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD, G
 from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.runtime import usable_cores
-from service.vgn.batching import DEFAULT_KIND, MicroBatcher
+from service.vgn.batching import MicroBatcher
 from service.vgn.checkpoint import card_summary, load_vgn, weights_id
 from service.vgn.detection import DetectionConfig, grasp_scores, grasps_from_scores
 from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
-from service.vgn.turns import RotationField, average_turned_quality, average_turned_rotation, turned_grids
+from service.vgn.turns import average_turned_quality, average_turned_rotation, turned_grids
 
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 
-#: Kinds of grid a forward pass carries: every output, or quality alone with orientations
-#: computed later where they are read (the turned grids of a turn-averaged request: their
-#: widths are never used and their orientations are read at a few hundred voxels).
-ALL_OUTPUTS, QUALITY_ONLY = DEFAULT_KIND, "quality"
-
-#: Above this many voxels a :class:`RotationsOnDemand` computes the whole rotation head once
-#: instead of voxel by voxel (which gathers a 432-value neighbourhood per voxel).
+#: Above this many voxels a :class:`HeadsOnDemand` computes its whole rotation and width heads
+#: once instead of voxel by voxel (which gathers a 432-value neighbourhood per voxel).
 WHOLE_HEAD_VOXELS = 4096
 
 
@@ -120,58 +115,121 @@ class InferenceOptions:
     lanes: int | None = None
 
 
-class RotationsOnDemand:
-    """One grid's orientations, computed from its decoder features where they are read.
+class ComputedHeads:
+    """Rotation (4, N³) and width (N³) computed for every voxel (the reference network)."""
 
-    Why: a turn-averaged request reads the turned grids' orientations at the few hundred
-    voxels detection keeps; the rotation head over all N³ voxels, and interleaving its output,
-    cost more than the rest of those grids' heads together."""
+    def __init__(self, rotation: np.ndarray, width: np.ndarray) -> None:
+        self.rotation, self.width = rotation, width
+
+    def rotation_at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(4, M) unit quaternions at the M voxels (i, j, depth)."""
+        return self.rotation[:, i, j, depth]
+
+    def width_at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(M,) widths (voxels) at the M voxels (i, j, depth)."""
+        return self.width[i, j, depth]
+
+    def whole(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rotation and width of every voxel."""
+        return self.rotation, self.width
+
+
+class HeadsOnDemand:
+    """One grid's rotation and width, computed from its decoder features where they are read.
+
+    Why: detection reads quality everywhere but width only where quality passes the threshold
+    and orientation only where a grasp may be returned, a few hundred of 64,000 voxels; the
+    two heads over every voxel, and interleaving their output, cost about as much as the
+    decoder's last convolution."""
 
     def __init__(self, network: FastVGN, features: torch.Tensor) -> None:
         self._network = network
         self._features = features  # (16, N/2, N/2, N/2), the grid's own copy
         self._padded = network.padded_features(features)
-        self._whole: np.ndarray | None = None
+        self._whole: tuple[np.ndarray, np.ndarray] | None = None
+        # The voxels last computed (sorted flat indices) and their heads: detection reads the
+        # widths where quality passes, then orientations at a subset of those voxels.
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
-    def at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    def rotation_at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """(4, M) unit quaternions at the M voxels (i, j, depth)."""
-        if self._whole is None and len(i) > WHOLE_HEAD_VOXELS:
+        return self._at(i, j, depth)[0]
+
+    def width_at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(M,) widths (voxels) at the M voxels (i, j, depth)."""
+        return self._at(i, j, depth)[1]
+
+    def whole(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rotation (4, N³) and width (N³) of every voxel, computed once."""
+        if self._whole is None:
             with torch.inference_mode():
-                self._whole = self._network.rotation_from(self._features[None])[0].cpu().numpy()
-        if self._whole is not None:
-            return self._whole[:, i, j, depth]
-        return self._network.rotation_at(self._padded, np.stack([i, j, depth], axis=1))
+                rotation, width = self._network.rotation_and_width_from(self._features[None])
+            self._whole = rotation[0].cpu().numpy(), width[0, 0].cpu().numpy()
+        return self._whole
+
+    def _at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._whole is not None or len(i) > WHOLE_HEAD_VOXELS:
+            rotation, width = self.whole()
+            return rotation[:, i, j, depth], width[i, j, depth]
+        n = self._padded.shape[0] - 2  # features are at half the output resolution, padded by one
+        flat = (i.astype(np.int64) * 2 * n + j) * 2 * n + depth
+        last = self._last
+        if last is not None and len(last[0]):
+            at = np.minimum(np.searchsorted(last[0], flat), len(last[0]) - 1)
+            if np.array_equal(last[0][at], flat):
+                return last[1][:, at], last[2][at]
+        rotation, width = self._network.heads_at(self._padded, np.stack([i, j, depth], axis=1))
+        order = np.argsort(flat)
+        self._last = flat[order], rotation[:, order], width[order]
+        return rotation, width
 
 
-@dataclass
-class QualityOutput:
-    """The output of a grid run for quality alone: quality (N³) and orientations on demand."""
-
-    quality: np.ndarray
-    rotation: RotationsOnDemand
-
-
-@dataclass
 class NetworkOutput:
-    """Voxel-wise network output as numpy: quality (N³), rotation (4, N³), width (N³ voxels).
+    """Voxel-wise network output: quality (N³) as numpy; rotation (4, N³, unit quaternions) and
+    width (N³, voxels) read where needed (:meth:`rotation_where`, :meth:`width_at`) or whole
+    (:attr:`rotation`, :attr:`width`), from heads that the fast network computes on demand.
 
-    A turn-averaged output also keeps the four turns' rotations (``turned_rotations``: the
-    unturned grid's array, the turned grids' computed on demand when the network allows) and
+    A turn-averaged output also keeps the four turns' rotations (``turned_rotations``) and
     averages them only where asked (:meth:`rotation_where`): a request reads the orientation
     of a few hundred voxels, and averaging all 64,000 would cost more than the rest of the
-    averaging together."""
+    averaging together. Its widths are the unturned grid's."""
 
-    quality: np.ndarray
-    rotation: np.ndarray
-    width: np.ndarray
-    turned_rotations: tuple[RotationField, ...] | None = None
+    def __init__(
+        self,
+        quality: np.ndarray,
+        heads: ComputedHeads | HeadsOnDemand,
+        turned_rotations: tuple[ComputedHeads | HeadsOnDemand, ...] | None = None,
+    ) -> None:
+        self.quality = quality
+        self.heads = heads
+        self.turned_rotations = turned_rotations
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """(4, N, N, N) orientations of the unturned grid at every voxel."""
+        return self.heads.whole()[0]
+
+    @property
+    def width(self) -> np.ndarray:
+        """(N, N, N) widths (voxels) at every voxel."""
+        return self.heads.whole()[1]
+
+    def width_at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(M,) widths (voxels) at the M voxels (i, j, depth)."""
+        return self.heads.width_at(i, j, depth)
 
     def rotation_where(self, where: np.ndarray | None = None) -> np.ndarray:
-        """Orientations (4, N³): turn-averaged at the voxels ``where`` marks (all voxels when
-        ``None``) for a turn-averaged output, elsewhere (and otherwise) :attr:`rotation`."""
+        """Orientations (4, N³), turn-averaged for a turn-averaged output, at the voxels
+        ``where`` marks (all voxels when ``None``). Elsewhere: the unturned grid's when they are
+        at hand (the reference network), zero otherwise; detection reads only ``where``."""
         if self.turned_rotations is None:
-            return self.rotation
-        return average_turned_rotation(self.turned_rotations, where)
+            if where is None or isinstance(self.heads, ComputedHeads):
+                return self.rotation
+            rotation = np.zeros((4, *self.quality.shape), dtype=np.float32)
+            index = np.nonzero(where)
+            rotation[(slice(None), *index)] = self.heads.rotation_at(*index)
+            return rotation
+        return average_turned_rotation(self.turned_rotations, where, n=self.quality.shape[0])
 
 
 class GraspPlanner:
@@ -268,52 +326,42 @@ class GraspPlanner:
         grid = np.ascontiguousarray(grid, dtype=np.float32)
         if not turn_average:
             return self._batcher.run(grid)
-        turned_kind = QUALITY_ONLY if isinstance(self._network, FastVGN) else ALL_OUTPUTS
-        grids = list(turned_grids(grid))  # rows of one stacked array: contiguous
-        outputs = self._batcher.run_many(grids, [ALL_OUTPUTS] + [turned_kind] * (len(grids) - 1))
+        outputs = self._batcher.run_many(list(turned_grids(grid)))  # rows of one stacked array: contiguous
         quality = average_turned_quality([output.quality for output in outputs])
-        rotations = tuple(output.rotation for output in outputs)
-        return NetworkOutput(quality, outputs[0].rotation, outputs[0].width, turned_rotations=rotations)
+        turned = tuple(output.heads for output in outputs)
+        return NetworkOutput(quality, outputs[0].heads, turned_rotations=turned)
 
-    def _forward_batch(self, grids: np.ndarray, kinds: list[str]) -> list[NetworkOutput | QualityOutput]:
-        """One forward pass over (B, N, N, N) grids of the given ``kinds``, split into up to
-        ``lanes`` parts that run side by side (see :func:`default_lanes`)."""
+    def _forward_batch(self, grids: np.ndarray) -> list[NetworkOutput]:
+        """One forward pass over (B, N, N, N) grids, split into up to ``lanes`` parts that run
+        side by side (see :func:`default_lanes`)."""
         assert self._network is not None
         lanes = min(len(grids), self.lanes)
         if lanes > 1 and self._lane_pool is not None:
             # The calling thread runs the first part itself: it is awake and its caches are
             # warm, while each hand-off to an idle lane costs a wake-up.
-            ends = np.cumsum([len(part) for part in np.array_split(grids, lanes)])
-            (first, first_kinds), *others = [
-                (grids[start:end], kinds[start:end]) for start, end in zip([0, *ends[:-1]], ends, strict=True)
-            ]
-            pending = [self._lane_pool.submit(self._forward_part, *part) for part in others]
-            parts = [self._forward_part(first, first_kinds), *(future.result() for future in pending)]
+            first, *others = np.array_split(grids, lanes)
+            pending = [self._lane_pool.submit(self._forward_part, part) for part in others]
+            parts = [self._forward_part(first), *(future.result() for future in pending)]
         else:
-            parts = [self._forward_part(grids, kinds)]
+            parts = [self._forward_part(grids)]
         return [output for part in parts for output in part]
 
-    def _forward_part(self, grids: np.ndarray, kinds: list[str]) -> list[NetworkOutput | QualityOutput]:
-        """The outputs of one forward pass over (B, N, N, N) grids, one per grid, each of its
-        kind. Each lane splits its own part, so the copies below run side by side too."""
+    def _forward_part(self, grids: np.ndarray) -> list[NetworkOutput]:
+        """The outputs of one forward pass over (B, N, N, N) grids, one per grid. Each lane
+        splits its own part, so the copies below run side by side too. The fast network runs
+        the quality head alone; rotation and width are computed where they are read."""
         tensor = torch.from_numpy(np.ascontiguousarray(grids))[:, None].to(self.device)
         network = self._network
         with torch.inference_mode():
             if not isinstance(network, FastVGN):
-                return _network_outputs(network(tensor))
+                quality, rotation, width = (t.cpu().numpy() for t in network(tensor))
+                # Copies, so that an output a session keeps does not hold on to the whole batch.
+                return [NetworkOutput(quality[b, 0].copy(), ComputedHeads(rotation[b].copy(), width[b, 0].copy()))
+                        for b in range(len(grids))]  # fmt: skip
             features = network.features(tensor)
-            full = [b for b, kind in enumerate(kinds) if kind != QUALITY_ONLY]
-            partial = [b for b, kind in enumerate(kinds) if kind == QUALITY_ONLY]
-            outputs: dict[int, NetworkOutput | QualityOutput] = {}
-            if full:
-                chosen = features if len(full) == len(kinds) else features[full]
-                outputs.update(zip(full, _network_outputs(network.outputs_from(chosen)), strict=True))
-            if partial:
-                quality = network.quality_from(features[partial]).cpu().numpy()
-                for row, b in enumerate(partial):
-                    rotations = RotationsOnDemand(network, features[b].clone())
-                    outputs[b] = QualityOutput(quality[row, 0].copy(), rotations)
-        return [outputs[b] for b in range(len(kinds))]
+            quality = network.quality_from(features).cpu().numpy()
+            return [NetworkOutput(quality[b, 0].copy(), HeadsOnDemand(network, features[b].clone()))
+                    for b in range(len(grids))]  # fmt: skip
 
     def plan(
         self, grid: np.ndarray, voxel_size: float, workspace_pose: np.ndarray, query: GraspQuery
@@ -334,16 +382,6 @@ class GraspPlanner:
     ) -> list[Grasp]:
         """World-frame grasps, best first, from the network's ``output`` on ``grid``."""
         config = detection_config(query, resolved_threshold(query, self.default_threshold))
-        score = grasp_scores(grid, output.quality, output.width, voxel_size, config)
+        score = grasp_scores(grid, output.quality, output.width_at, voxel_size, config)
         rotation = output.rotation_where(score > 0)  # the only voxels detection reads
-        return grasps_from_scores(score, rotation, output.width, voxel_size, workspace_pose, config)
-
-
-def _network_outputs(tensors: tuple[torch.Tensor, torch.Tensor, torch.Tensor]) -> list[NetworkOutput]:
-    """One :class:`NetworkOutput` per grid of a batch's quality, rotation and width tensors."""
-    quality, rotation, width = (t.cpu().numpy() for t in tensors)
-    if len(quality) == 1:
-        return [NetworkOutput(quality[0, 0], rotation[0], width[0, 0])]
-    # Copies, so that an output a session keeps does not hold on to the whole batch.
-    return [NetworkOutput(quality[b, 0].copy(), rotation[b].copy(), width[b, 0].copy())
-            for b in range(len(quality))]  # fmt: skip
+        return grasps_from_scores(score, rotation, output.width_at, voxel_size, workspace_pose, config)

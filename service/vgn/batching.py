@@ -5,9 +5,8 @@ grid, so concurrent sessions would otherwise queue behind each other for nothing
 runs at a time: it takes the first waiting grid, waits at most
 ``window_s`` for others (none on a CPU by default, where a batch costs as much as its parts),
 also takes whatever is already queued, up to ``max_batch``, and runs them as one batch.
-Grids of different resolutions are run as separate batches. Each grid carries a *kind*
-(e.g. which outputs it needs) that the forward receives beside it. One forward at a time
-also keeps CPU inference from oversubscribing the cores.
+Grids of different resolutions are run as separate batches. One forward at a time also
+keeps CPU inference from oversubscribing the cores.
 """
 
 from __future__ import annotations
@@ -22,11 +21,8 @@ from typing import Any
 
 import numpy as np
 
-#: A batched forward: (B, N, N, N) float32 grids and their B kinds → per-grid outputs, in order.
-BatchForward = Callable[[np.ndarray, list[str]], list]
-
-#: The kind of a grid submitted without one.
-DEFAULT_KIND = "all"
+#: A batched forward: (B, N, N, N) float32 grids → per-grid outputs, in order.
+BatchForward = Callable[[np.ndarray], list]
 
 
 @dataclass
@@ -65,23 +61,21 @@ class MicroBatcher:
         self._forward = forward
         self.window_s = window_s
         self.max_batch = max_batch
-        self._queue: queue.SimpleQueue[tuple[np.ndarray, str, Future]] = queue.SimpleQueue()
+        self._queue: queue.SimpleQueue[tuple[np.ndarray, Future]] = queue.SimpleQueue()
         self._turn = threading.Condition()
         self._leading = False
         self.stats = BatchStats()
 
-    def run(self, grid: np.ndarray, kind: str = DEFAULT_KIND) -> Any:
+    def run(self, grid: np.ndarray) -> Any:
         """The output for one grid, from a forward pass it may share with others."""
-        return self.run_many([grid], [kind])[0]
+        return self.run_many([grid])[0]
 
-    def run_many(self, grids: list[np.ndarray], kinds: list[str] | None = None) -> list[Any]:
-        """The outputs for several grids of one request (of the given ``kinds``, default
-        :data:`DEFAULT_KIND`), queued together so that they share a forward pass (with each
-        other and with concurrent requests)."""
-        kinds = [DEFAULT_KIND] * len(grids) if kinds is None else kinds
+    def run_many(self, grids: list[np.ndarray]) -> list[Any]:
+        """The outputs for several grids of one request, queued together so that they share
+        a forward pass (with each other and with concurrent requests)."""
         futures: list[Future] = [Future() for _ in grids]
-        for grid, kind, future in zip(grids, kinds, futures, strict=True):
-            self._queue.put((grid, kind, future))
+        for grid, future in zip(grids, futures, strict=True):
+            self._queue.put((grid, future))
         while not all(future.done() for future in futures):
             with self._turn:
                 while self._leading and not all(future.done() for future in futures):
@@ -97,9 +91,9 @@ class MicroBatcher:
                     self._turn.notify_all()
         return [future.result() for future in futures]
 
-    def _collect(self) -> list[tuple[np.ndarray, str, Future]]:
+    def _collect(self) -> list[tuple[np.ndarray, Future]]:
         """What is queued, and what arrives within the window, up to ``max_batch``."""
-        pending: list[tuple[np.ndarray, str, Future]] = []
+        pending: list[tuple[np.ndarray, Future]] = []
         deadline = time.perf_counter() + self.window_s
         while len(pending) < self.max_batch:
             remaining = deadline - time.perf_counter()
@@ -110,20 +104,18 @@ class MicroBatcher:
             pending.append(item)
         return pending
 
-    def _run(self, pending: list[tuple[np.ndarray, str, Future]]) -> None:
-        by_shape: dict[tuple[int, ...], list[tuple[np.ndarray, str, Future]]] = {}
-        for grid, kind, future in pending:
+    def _run(self, pending: list[tuple[np.ndarray, Future]]) -> None:
+        by_shape: dict[tuple[int, ...], list[tuple[np.ndarray, Future]]] = {}
+        for grid, future in pending:
             if future.set_running_or_notify_cancel():
-                by_shape.setdefault(grid.shape, []).append((grid, kind, future))
+                by_shape.setdefault(grid.shape, []).append((grid, future))
         for group in by_shape.values():
             try:
-                outputs = self._forward(
-                    np.stack([grid for grid, _, _ in group]), [kind for _, kind, _ in group]
-                )
+                outputs = self._forward(np.stack([grid for grid, _ in group]))
             except BaseException as error:  # every waiting request must hear of it
-                for _, _, future in group:
+                for _, future in group:
                     future.set_exception(error)
                 continue
             self.stats.record(len(group))
-            for (_, _, future), output in zip(group, outputs, strict=True):
+            for (_, future), output in zip(group, outputs, strict=True):
                 future.set_result(output)

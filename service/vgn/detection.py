@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +14,14 @@ from client.schemas import Grasp
 
 #: Grid values strictly between these are observed voxels behind (inside) the surface.
 _INSIDE_LOW, _SURFACE = 1e-3, 0.5
+
+#: Widths (voxels): an (N, N, N) array, or a function giving the widths at voxels (i, j, k), so
+#: that a network computing its width head on demand computes it only where detection reads it.
+Widths = np.ndarray | Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def _widths_at(width: Widths, index: tuple[np.ndarray, ...]) -> np.ndarray:
+    return width[index] if isinstance(width, np.ndarray) else width(*index)
 
 
 @dataclass(frozen=True)
@@ -67,14 +76,14 @@ def detect_grasps(
 def grasp_scores(
     grid: np.ndarray,
     quality: np.ndarray,
-    width: np.ndarray,
+    width: Widths,
     voxel_size: float,
     config: DetectionConfig = DetectionConfig(),
     near_surface: np.ndarray | None = None,
 ) -> np.ndarray:
     """(N, N, N) smoothed quality where a grasp may be returned, zero elsewhere: the first
     half of :func:`detect_grasps`, which reads no orientation (so a caller can work out
-    orientations only where this is positive)."""
+    orientations only where this is positive) and widths only where quality passes."""
     if near_surface is None:
         near_surface = grasp_region(grid, config)
     score = _valid_quality(near_surface, quality, width, config)
@@ -86,7 +95,7 @@ def grasp_scores(
 def grasps_from_scores(
     score: np.ndarray,
     rotation: np.ndarray,
-    width: np.ndarray,
+    width: Widths,
     voxel_size: float,
     workspace_pose: np.ndarray,
     config: DetectionConfig = DetectionConfig(),
@@ -143,13 +152,17 @@ def local_maxima(score: np.ndarray, size: int) -> np.ndarray:
 
 
 def _valid_quality(
-    near_surface: np.ndarray, quality: np.ndarray, width: np.ndarray, config: DetectionConfig
+    near_surface: np.ndarray, quality: np.ndarray, width: Widths, config: DetectionConfig
 ) -> np.ndarray:
     """Smoothed quality, zero where no grasp may be: away from the observed free space near
-    the surface, at implausible widths, or below the threshold."""
+    the surface, below the threshold, or at implausible widths (read only where the rest holds)."""
     score = ndimage.gaussian_filter(quality.astype(np.float32), config.smoothing_sigma, mode="nearest")
-    plausible = (width >= config.min_width_voxels) & (width <= config.max_width_voxels)
-    score[~(near_surface & plausible) | (score < config.threshold)] = 0.0
+    valid = near_surface & (score >= config.threshold)
+    index = np.nonzero(valid)
+    widths = _widths_at(width, index)
+    implausible = (widths < config.min_width_voxels) | (widths > config.max_width_voxels)
+    valid[tuple(axis[implausible] for axis in index)] = False
+    score[~valid] = 0.0
     return score
 
 
@@ -179,7 +192,7 @@ def _to_world(
     indices: np.ndarray,
     score: np.ndarray,
     rotation: np.ndarray,
-    width: np.ndarray,
+    width: Widths,
     voxel_size: float,
     workspace_pose: np.ndarray,
 ) -> list[Grasp]:
@@ -192,7 +205,7 @@ def _to_world(
     )
     approaches = orientations.apply([0.0, 0.0, 1.0])
     quaternions = orientations.as_quat()
-    widths = width[index] * voxel_size
+    widths = _widths_at(width, index) * voxel_size
     qualities = np.clip(score[index], 0.0, 1.0)
     return [
         Grasp(

@@ -28,6 +28,8 @@ from service.vgn.network import VGN
 
 #: Channel split of the fused head: quality, rotation (4), width.
 HEAD_CHANNELS = (1, 4, 1)
+#: The fused head's folded output rows of rotation and width (8 parities per channel).
+LAZY_ROWS = slice(HEAD_CHANNELS[0] * 8, sum(HEAD_CHANNELS) * 8)
 #: ``F.normalize``'s floor on the norm, kept so near-zero rotations come out alike.
 NORM_EPS = 1e-12
 
@@ -134,12 +136,11 @@ class FastVGN(nn.Module):
             self.register_buffer(f"folded{index}_w", weight.detach().to(dtype))
             self.register_buffer(f"folded{index}_b", bias.detach().to(dtype))
         self._strides = [(stride, padding) for _, _, stride, padding in self._plain]
-        # The rotation head's folded taps as a (27·16, 4·8) matrix, for :meth:`rotation_at`.
-        rows = slice(HEAD_CHANNELS[0] * 8, sum(HEAD_CHANNELS[:2]) * 8)
-        rotation_weight, rotation_bias = (t.detach().to(dtype).float().numpy() for t in self._folded[2])
-        taps = rotation_weight[rows].transpose(0, 2, 3, 4, 1)  # (4·8, 3, 3, 3, 16): channels last
-        self._rotation_taps = torch.from_numpy(taps.reshape(32, -1).T.copy())
-        self._rotation_bias = rotation_bias[rows].reshape(4, 8)
+        # The rotation and width heads' folded taps as a (27·16, 5·8) matrix, for :meth:`heads_at`.
+        weight, bias = (t.detach().to(dtype).float().numpy() for t in self._folded[2])
+        taps = weight[LAZY_ROWS].transpose(0, 2, 3, 4, 1)  # (5·8, 3, 3, 3, 16): channels last
+        self._lazy_taps = torch.from_numpy(taps.reshape(len(taps), -1).T.copy())
+        self._lazy_bias = bias[LAZY_ROWS].reshape(5, 8)
         self._neighbourhood = np.stack(np.meshgrid(*(np.arange(3),) * 3, indexing="ij"), -1).reshape(27, 3)
         del self._plain, self._folded
 
@@ -193,41 +194,43 @@ class FastVGN(nn.Module):
         quality = torch.empty((batch, 1, 2 * d, 2 * h, 2 * w), dtype=torch.float32, device=logits.device)
         return pixel_shuffle_3d(logits.sigmoid_(), out=quality)
 
-    def rotation_from(self, features: torch.Tensor) -> torch.Tensor:
-        """Rotation alone, (B, 4, N, N, N) unit quaternions, from :meth:`features`."""
-        rows = slice(HEAD_CHANNELS[0] * 8, sum(HEAD_CHANNELS[:2]) * 8)
-        logits = F.conv3d(features, self.folded2_w[rows], self.folded2_b[rows], padding=1).float()
+    def rotation_and_width_from(self, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Rotation (B, 4, N, N, N) unit quaternions and width (B, 1, N, N, N), float32, from
+        :meth:`features`: the rest of what :meth:`outputs_from` gives beside quality."""
+        logits = F.conv3d(features, self.folded2_w[LAZY_ROWS], self.folded2_b[LAZY_ROWS], padding=1).float()
         batch, _, d, h, w = logits.shape
-        _normalise_(logits.view(batch, 4, 8, d, h, w), dim=1)
-        rotation = torch.empty((batch, 4, 2 * d, 2 * h, 2 * w), dtype=torch.float32, device=logits.device)
-        return pixel_shuffle_3d(logits, out=rotation)
+        _normalise_(logits.view(batch, 5, 8, d, h, w)[:, :4], dim=1)
+        heads = torch.empty((batch, 5, 2 * d, 2 * h, 2 * w), dtype=torch.float32, device=logits.device)
+        rotation, width = pixel_shuffle_3d(logits, out=heads).split(HEAD_CHANNELS[1:], dim=1)
+        return rotation, width
 
     def padded_features(self, features: torch.Tensor) -> np.ndarray:
-        """One grid's (16, N/2, N/2, N/2) :meth:`features` as what :meth:`rotation_at` reads:
+        """One grid's (16, N/2, N/2, N/2) :meth:`features` as what :meth:`heads_at` reads:
         float32 numpy, zero-padded by one voxel on every side, channels last (so that a
         voxel's neighbourhood is 27 contiguous rows)."""
         return F.pad(features.float(), (1, 1, 1, 1, 1, 1)).permute(1, 2, 3, 0).contiguous().cpu().numpy()
 
-    def rotation_at(self, padded: np.ndarray, voxels: np.ndarray) -> np.ndarray:
-        """Rotations (4, M) of one grid at M voxels ((M, 3) indices into the N³ output), from
-        its :meth:`padded_features`: the rotation head evaluated at those voxels alone, which
-        for a few hundred voxels is far cheaper than the whole head.
+    def heads_at(self, padded: np.ndarray, voxels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotations (4, M) and widths (M,) of one grid at M voxels ((M, 3) indices into the N³
+        output), from its :meth:`padded_features`: the two heads evaluated at those voxels
+        alone, which for a few hundred voxels is far cheaper than the whole heads.
 
         Output voxel v reads the 3³ feature neighbourhood of v // 2 through the folded taps of
         its parity v % 2 (:func:`polyphase_weights`); each neighbourhood is read once for all
         the voxels that share it, which in detection's clusters is a fraction of them."""
-        d, h, w, channels = padded.shape
+        _, h, w, channels = padded.shape
         strides = np.array([h * w, w, 1])
         corner = (voxels // 2) @ strides  # the padding shifts the neighbourhood to start there
         cells, cell_of_voxel = np.unique(corner, return_inverse=True)
         rows = padded.reshape(-1, channels)[cells[:, None] + self._neighbourhood @ strides]
         # torch's product, on the threads the service gave torch: numpy's BLAS starts its own
         # threads, which spin for a core that the other inference lane holds (8 ms, not 0.1).
-        logits = (torch.from_numpy(rows.reshape(len(cells), 27 * channels)) @ self._rotation_taps).numpy()
+        logits = (torch.from_numpy(rows.reshape(len(cells), 27 * channels)) @ self._lazy_taps).numpy()
         parity = voxels % 2
         phase = parity[:, 0] * 4 + parity[:, 1] * 2 + parity[:, 2]
-        rotation = logits.reshape(-1, 4, 8)[cell_of_voxel, :, phase].T + self._rotation_bias[:, phase]
-        return rotation / np.maximum(np.linalg.norm(rotation, axis=0), NORM_EPS)
+        heads = logits.reshape(-1, 5, 8)[cell_of_voxel, :, phase].T + self._lazy_bias[:, phase]
+        rotation = heads[:4] / np.maximum(np.linalg.norm(heads[:4], axis=0), NORM_EPS)
+        return rotation, heads[4]
 
 
 def _normalise_(quaternions: torch.Tensor, dim: int) -> None:

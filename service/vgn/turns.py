@@ -22,7 +22,7 @@ import numpy as np
 class RotationReader(Protocol):
     """Orientations of one grid that are computed where they are read, not stored whole."""
 
-    def at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    def rotation_at(self, i: np.ndarray, j: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """(4, M) unit quaternions ``[x, y, z, w]`` at the M voxels (i, j, depth)."""
         ...
 
@@ -35,7 +35,7 @@ def rotations_at(field: RotationField, i: np.ndarray, j: np.ndarray, depth: np.n
     """(4, M) orientations of ``field`` at the M voxels (i, j, depth)."""
     if isinstance(field, np.ndarray):
         return field[:, i, j, depth]
-    return field.at(i, j, depth)
+    return field.rotation_at(i, j, depth)
 
 
 #: Quarter turns about +z whose network outputs are averaged: 0°, 90°, 180°, 270°.
@@ -89,11 +89,11 @@ def average_turned_quality(qualities: Sequence[np.ndarray]) -> np.ndarray:
 
 
 def average_turned_rotation(
-    rotations: Sequence[RotationField], where: np.ndarray | None = None
+    rotations: Sequence[RotationField], where: np.ndarray | None = None, n: int | None = None
 ) -> np.ndarray:
     """(4, N, N, N) mean grasp orientation, in the unturned grid's frame and voxels, of the
-    four network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`: the
-    unturned grid's as an array, the turned grids' as arrays or read on demand.
+    four network rotations (quaternions ``[x, y, z, w]``) on :func:`turned_grids`, each an
+    array or read on demand (``n``, the grid's width, is needed when the first is read so).
 
     Each turn's quaternion is read at the turned grasp position and turned back about z. A
     quaternion and its negative are one rotation, and a grasp turned by π about its approach is
@@ -101,22 +101,28 @@ def average_turned_rotation(
     unturned grid's own prediction; the mean of the aligned forms, normalised, is the result.
 
     ``where`` ((N, N, N) bool) limits the averaging to those voxels, e.g. the ones detection
-    reads: elsewhere the result is the unturned grid's prediction.
+    reads: elsewhere the result is the unturned grid's prediction when that is an array, and
+    zero otherwise.
     """
     reference = rotations[0]
-    if not isinstance(reference, np.ndarray):
-        raise TypeError("the unturned grid's rotations must be an array")
-    n = reference.shape[-1]
-    i, j, depth = np.nonzero(np.ones(reference.shape[1:], dtype=bool) if where is None else where)
-    chosen_reference = reference[:, i, j, depth]
-    total = chosen_reference.astype(np.float32, copy=True)
+    if isinstance(reference, np.ndarray):
+        n = reference.shape[-1]
+    elif n is None:
+        raise ValueError("the grid's width n is needed when the unturned rotations are read on demand")
+    shape = (n, n, n)
+    i, j, depth = np.nonzero(np.ones(shape, dtype=bool) if where is None else where)
+    chosen_reference = rotations_at(reference, i, j, depth).astype(np.float32, copy=False)
+    total = chosen_reference.copy()
     for k, field in zip(TURNS[1:], rotations[1:], strict=True):
         turned_i, turned_j = (index[i, j] for index in turned_index(n, k))
         on_grid = (turned_i >= 0) & (turned_i < n) & (turned_j >= 0) & (turned_j < n)
         turned = np.zeros_like(chosen_reference)
         turned[:, on_grid] = rotations_at(field, turned_i[on_grid], turned_j[on_grid], depth[on_grid])
         total += _aligned_back(turned, chosen_reference, k)
-    averaged = reference.copy()
+    if isinstance(reference, np.ndarray):
+        averaged = reference.copy()
+    else:
+        averaged = np.zeros((4, *shape), dtype=np.float32)
     averaged[:, i, j, depth] = total / np.maximum(np.linalg.norm(total, axis=0), 1e-12)
     return averaged
 

@@ -14,7 +14,7 @@ import pytest
 from client.connect import connect
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.planner import GraspPlanner, InferenceOptions, NetworkOutput, QualityOutput
+from service.planner import ComputedHeads, GraspPlanner, HeadsOnDemand, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.vgn.batching import MicroBatcher
 from tests.helpers.grids import recorded_grids
@@ -52,7 +52,7 @@ def test_a_batch_split_into_lanes_gives_each_grid_its_own_result(lanes: int):
     options = InferenceOptions(precision="fp32", lanes=lanes)
     planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", options)
     assert planner.runtime()["lanes"] == lanes
-    split = planner._forward_batch(np.stack(grids), ["all"] * len(grids))
+    split = planner._forward_batch(np.stack(grids))
     alone = [planner.infer(grid) for grid in grids]
     assert len(split) == len(grids) > lanes
     for single, batched in zip(alone, split, strict=True):
@@ -60,30 +60,28 @@ def test_a_batch_split_into_lanes_gives_each_grid_its_own_result(lanes: int):
             np.testing.assert_allclose(getattr(batched, name), getattr(single, name), atol=1e-5, rtol=1e-5)
 
 
-def test_grids_run_for_quality_alone_get_the_quality_and_orientations_they_get_in_full():
-    """A batch mixing grids that need every output with grids that need quality alone (the
-    turned grids of a turn-averaged request), split over lanes: each gets its own answer."""
+def test_rotation_and_width_on_demand_equal_the_whole_heads():
+    """The fast network computes rotation and width where they are read: a few voxels at a
+    time (from the decoder's features), or whole past a few thousand; both equal the
+    reference network's heads."""
     grids = [grid for _, grid in recorded_grids()]
-    planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32", lanes=2))
-    kinds = ["all", "quality", "all", "quality", "quality"][: len(grids)]
-    assert len(grids) >= 4
-    mixed = planner._forward_batch(np.stack(grids), kinds)
-    alone = [planner.infer(grid) for grid in grids]
-    voxels = np.random.default_rng(1).integers(0, grids[0].shape[0], size=(3, 200))
-    for kind, single, batched in zip(kinds, alone, mixed, strict=False):
-        np.testing.assert_allclose(batched.quality, single.quality, atol=1e-5)
-        if kind == "all":
-            assert isinstance(batched, NetworkOutput)
-            np.testing.assert_allclose(batched.width, single.width, atol=1e-5, rtol=1e-5)
-            continue
-        assert isinstance(batched, QualityOutput)
-        expected = single.rotation[:, voxels[0], voxels[1], voxels[2]]
-        np.testing.assert_allclose(batched.rotation.at(*voxels), expected, atol=1e-5)
-        # Asked for more voxels than pay off one by one, it runs the whole rotation head.
-        everywhere = tuple(index.ravel() for index in np.indices(grids[0].shape))
+    fast = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32", lanes=2))
+    reference = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(form="reference"))
+    voxels = tuple(np.random.default_rng(1).integers(0, grids[0].shape[0], size=(3, 200)))
+    everywhere = tuple(index.ravel() for index in np.indices(grids[0].shape))
+    for lazy, whole in zip(fast._forward_batch(np.stack(grids)), map(reference.infer, grids), strict=True):
+        assert isinstance(lazy.heads, HeadsOnDemand) and isinstance(whole.heads, ComputedHeads)
+        np.testing.assert_allclose(lazy.quality, whole.quality, atol=1e-4)
         np.testing.assert_allclose(
-            batched.rotation.at(*everywhere), single.rotation.reshape(4, -1), atol=1e-5
+            lazy.heads.rotation_at(*voxels), whole.rotation[(slice(None), *voxels)], atol=1e-4
         )
+        np.testing.assert_allclose(lazy.width_at(*voxels), whole.width[voxels], atol=1e-3, rtol=1e-4)
+        assert lazy.heads._whole is None, "a few voxels do not run the whole heads"
+        np.testing.assert_allclose(
+            lazy.heads.rotation_at(*everywhere), whole.rotation.reshape(4, -1), atol=1e-4
+        )
+        assert lazy.heads._whole is not None
+        np.testing.assert_allclose(lazy.width, whole.width, atol=1e-3, rtol=1e-4)
 
 
 def test_a_cpu_gets_one_lane_per_group_of_torch_threads(monkeypatch):
@@ -102,7 +100,7 @@ def test_a_cpu_gets_one_lane_per_group_of_torch_threads(monkeypatch):
 def test_a_failing_forward_reaches_every_waiting_request_and_the_batcher_goes_on():
     calls = []
 
-    def forward(grids: np.ndarray, kinds: list[str]) -> list:
+    def forward(grids: np.ndarray) -> list:
         calls.append(len(grids))
         if grids[0, 0, 0, 0] < 0:
             raise ValueError("bad grid")

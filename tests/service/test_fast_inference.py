@@ -9,7 +9,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
-from service.planner import GraspPlanner, InferenceOptions, native_bf16
+from service.planner import ComputedHeads, GraspPlanner, HeadsOnDemand, InferenceOptions, native_bf16
 from service.settings import PACKAGED_MODEL
 from service.vgn.agreement import Tolerance, disagreements, network_outputs, voxelwise_disagreements
 from service.vgn.checkpoint import load_vgn
@@ -134,8 +134,8 @@ def test_the_planner_runs_the_fast_form_by_default_and_the_reference_on_request(
         fast.infer(grid, turn_average=True),
         reference.infer(grid, turn_average=True),
     )
-    assert isinstance(reference_averaged.turned_rotations[1], np.ndarray)
-    assert not isinstance(fast_averaged.turned_rotations[1], np.ndarray)
+    assert isinstance(reference_averaged.turned_rotations[1], ComputedHeads)
+    assert isinstance(fast_averaged.turned_rotations[1], HeadsOnDemand)
     assert np.abs(fast_averaged.quality - reference_averaged.quality).max() < 0.02
     where = fast_averaged.quality > 0.5
     assert 0 < where.sum() < 4096
@@ -144,22 +144,26 @@ def test_the_planner_runs_the_fast_form_by_default_and_the_reference_on_request(
             "q...,q...->...", fast_averaged.rotation_where(where), reference_averaged.rotation_where(where)
         )
     )
-    assert np.percentile(agreement[where], 5) > 0.9999, "orientations agree (up to sign) at 95 % of the voxels"
+    assert np.percentile(agreement[where], 5) > 0.9999, (
+        "orientations agree (up to sign) at 95 % of the voxels"
+    )
 
 
-def test_each_head_alone_and_the_rotation_at_a_few_voxels_match_the_fused_heads():
-    """Quality alone, rotation alone and rotations evaluated voxel by voxel (the turned
-    grids' path) equal what the fused heads give; voxels on every face are included, where
+def test_each_head_alone_and_the_heads_at_a_few_voxels_match_the_fused_heads():
+    """Quality alone, rotation and width alone, and the two evaluated voxel by voxel (what
+    detection reads) equal what the fused heads give; voxels on every face are included, where
     the neighbourhood reaches into the padding."""
     fast = FastVGN.from_vgn(load_vgn(PACKAGED_MODEL))
     _, grid = recorded_grids()[0]
     n = grid.shape[0]
     with torch.inference_mode():
         tensor = torch.from_numpy(np.ascontiguousarray(grid))[None, None]
-        quality, rotation, _ = fast(tensor)
+        quality, rotation, width = fast(tensor)
         features = fast.features(tensor)
         torch.testing.assert_close(fast.quality_from(features), quality, atol=1e-6, rtol=0)
-        torch.testing.assert_close(fast.rotation_from(features), rotation, atol=1e-6, rtol=0)
+        rotation_alone, width_alone = fast.rotation_and_width_from(features)
+        torch.testing.assert_close(rotation_alone, rotation, atol=1e-6, rtol=0)
+        torch.testing.assert_close(width_alone, width, atol=1e-5, rtol=1e-6)
         rng = np.random.default_rng(0)
         voxels = rng.integers(0, n, size=(300, 3))
         voxels[:6] = [
@@ -170,7 +174,9 @@ def test_each_head_alone_and_the_rotation_at_a_few_voxels_match_the_fused_heads(
             [5, 0, n - 1],
             [n - 1, 3, 0],
         ]
-        at = fast.rotation_at(fast.padded_features(features[0]), voxels)
+        at, width_at = fast.heads_at(fast.padded_features(features[0]), voxels)
     expected = rotation[0].numpy()[:, voxels[:, 0], voxels[:, 1], voxels[:, 2]]
+    np.testing.assert_allclose(width_at, width[0, 0].numpy()[tuple(voxels.T)], atol=1e-4, rtol=1e-5)
     np.testing.assert_allclose(at, expected, atol=1e-5)
-    assert fast.rotation_at(fast.padded_features(features[0]), voxels[:0]).shape == (4, 0)
+    none = fast.heads_at(fast.padded_features(features[0]), voxels[:0])
+    assert none[0].shape == (4, 0) and none[1].shape == (0,)
