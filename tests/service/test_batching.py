@@ -14,9 +14,10 @@ import pytest
 from client.connect import connect
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.planner import ComputedHeads, GraspPlanner, HeadsOnDemand, InferenceOptions
+from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.vgn.batching import MicroBatcher
+from service.vgn.outputs import ComputedHeads, HeadsOnDemand
 from tests.helpers.grids import recorded_grids
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 

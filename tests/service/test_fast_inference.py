@@ -9,7 +9,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
-from service.planner import ComputedHeads, GraspPlanner, HeadsOnDemand, InferenceOptions, native_bf16
+from service.planner import GraspPlanner, InferenceOptions, native_bf16
 from service.settings import PACKAGED_MODEL
 from service.vgn.agreement import Tolerance, disagreements, network_outputs, voxelwise_disagreements
 from service.vgn.checkpoint import load_vgn
@@ -22,6 +22,7 @@ from service.vgn.fast import (
     space_to_depth_weights,
 )
 from service.vgn.network import VGN
+from service.vgn.outputs import ComputedHeads, HeadsOnDemand
 from tests.helpers.grids import recorded_grids
 
 VOXEL = 0.3 / 40
