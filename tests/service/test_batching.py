@@ -85,6 +85,30 @@ def test_rotation_and_width_on_demand_equal_the_whole_heads():
         np.testing.assert_allclose(lazy.width, whole.width, atol=1e-3, rtol=1e-4)
 
 
+def test_orientations_at_voxels_whose_widths_were_just_read_come_from_the_same_computation():
+    """Detection reads widths where quality passes, then orientations at some of those voxels:
+    the second read reuses the first's computation, and a read elsewhere computes afresh."""
+    _, grid = recorded_grids()[0]
+    planner = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32"))
+    heads = planner.infer(grid).heads
+    assert isinstance(heads, HeadsOnDemand)
+    rng = np.random.default_rng(2)
+    voxels = np.unique(rng.integers(0, grid.shape[0] ** 3, 300))
+    i, j, depth = np.unravel_index(voxels, grid.shape)
+    whole_rotation, whole_width = ComputedHeads(*heads.whole()).whole()
+    heads._whole = None  # back to computing voxel by voxel
+    np.testing.assert_allclose(heads.width_at(i, j, depth), whole_width[i, j, depth], atol=1e-3, rtol=1e-4)
+    first = heads._last
+    subset = rng.permutation(len(voxels))[:50]
+    rotation = heads.rotation_at(i[subset], j[subset], depth[subset])
+    assert heads._last is first, "a subset is read from the last computation"
+    np.testing.assert_allclose(rotation, whole_rotation[:, i[subset], j[subset], depth[subset]], atol=1e-4)
+    elsewhere = np.setdiff1d(np.arange(grid.shape[0] ** 3), voxels)[:20]
+    a, b, c = np.unravel_index(elsewhere, grid.shape)
+    np.testing.assert_allclose(heads.rotation_at(a, b, c), whole_rotation[:, a, b, c], atol=1e-4)
+    assert heads._last is not first
+
+
 def test_a_cpu_gets_one_lane_per_group_of_torch_threads(monkeypatch):
     import torch
 
