@@ -8,7 +8,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp
+from client.schemas import Grasp, GraspQuery
 from service.planner import GraspPlanner, InferenceOptions, native_bf16
 from service.settings import PACKAGED_MODEL
 from service.vgn.agreement import Tolerance, disagreements, network_outputs, voxelwise_disagreements
@@ -91,6 +91,29 @@ def test_fast_top10_grasps_agree_with_the_reference_on_recorded_scenes(dtype):
         assert voxelwise_disagreements(*outputs, graspable, tolerance) == [], name
         compared += min(len(expected), 10)
     assert compared >= 35, "the recorded scenes should offer enough grasps to compare"
+
+
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_the_planners_grasps_agree_with_the_reference_plain_and_turn_averaged(precision):
+    """The planner's own path (quality head alone, rotation and width where detection reads
+    them) gives the reference network's top-10 grasps, for plain and turn-averaged requests."""
+    if precision == "bf16" and not native_bf16(torch.device("cpu")):
+        pytest.skip("this CPU has no native bfloat16; the service uses float32 here")
+    fast = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision=precision))
+    reference = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(form="reference"))
+    tolerance = Tolerance(position_m=VOXEL, angle_deg=5.0, quality=0.02)
+    query = GraspQuery(threshold=THRESHOLD, turn_average=False)
+    for turn_average in (False, True):
+        for name, grid in recorded_grids():
+            expected, actual = (
+                planner.detect(grid, planner.infer(grid, turn_average), VOXEL, np.eye(4), query)
+                for planner in (reference, fast)
+            )
+            assert len(expected) >= 5, name
+            assert disagreements(expected, actual, tolerance, neighbour_swaps=True) == [], (
+                name,
+                turn_average,
+            )
 
 
 def test_the_agreement_check_notices_a_different_network():
