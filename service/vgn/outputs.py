@@ -44,9 +44,10 @@ class HeadsOnDemand:
     """One grid's rotation and width, computed from its decoder features where they are read.
 
     Why: detection reads quality everywhere but width only where quality passes the threshold
-    and orientation only where a grasp may be returned, a few hundred of 64,000 voxels; the
-    two heads over every voxel, and interleaving their output, cost about as much as the
-    decoder's last convolution."""
+    and orientation only where a grasp may be returned, a few hundred of 64,000 voxels. For two
+    40³ grids (bfloat16, one thread) the fused head's convolution took 3.3 ms against 1.3 ms for
+    quality alone, and activating and interleaving all six channels another 3.1 ms; these heads
+    at the voxels detection reads take 0.16-0.39 ms a grid."""
 
     def __init__(self, network: FastVGN, features: torch.Tensor) -> None:
         self._network = network
@@ -126,8 +127,9 @@ class NetworkOutput:
 
     def rotation_where(self, where: np.ndarray | None = None) -> np.ndarray:
         """Orientations (4, N³), turn-averaged for a turn-averaged output, at the voxels
-        ``where`` marks (all voxels when ``None``). Elsewhere: the unturned grid's when they are
-        at hand (the reference network), zero otherwise; detection reads only ``where``."""
+        ``where`` marks (all voxels when ``None``). Elsewhere: zero, except for a plain output
+        whose heads were computed whole (the reference network), which returns them all;
+        detection reads only ``where``."""
         if self.turned_rotations is None:
             if where is None or isinstance(self.heads, ComputedHeads):
                 return self.rotation
