@@ -1,7 +1,7 @@
 """A grasp request's planning on a recorded fused volume, on the CPU or a GPU.
 
     python -m benchmarks.device_planning record --out VOLUME.npz
-    python -m benchmarks.device_planning time VOLUME.npz [--device cuda] [--repeats N] [--json PATH]
+    python -m benchmarks.device_planning time VOLUME.npz [--device cuda] [--heads whole] [--repeats N] [--json PATH]
 
 ``record`` fuses the latency benchmark's box scene (six views, as ``benchmarks.latency``) in a
 planning session and saves what a grasp request reads from it: the network's grid, the surface
@@ -17,6 +17,8 @@ out what a GPU does not change (HTTP, the session lock, fusion), so its figures 
 of ``benchmarks.latency``'s request that the device decides. The two requests alternate and
 the CPU rows of the same run are the baseline; ``--concurrent`` adds requests from several
 threads at once (on a GPU the planner's micro-batcher shares their forward passes).
+``--heads`` times the fast network's rotation and width computed on demand or whole
+(``VGN_HEADS``) on each device, one after the other.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from benchmarks.report import cpu_model, device_planning_table
 from client.schemas import GraspQuery
 from service.clearance import clear_grasps
 from service.grip import MIN_GRIP_FRAMES, gripping_grasps
-from service.planner import GraspPlanner
+from service.planner import HEADS, GraspPlanner, InferenceOptions
 from service.runtime import apply_threads, tune_malloc
 from service.vgn.checkpoint import weights_id
 
@@ -131,12 +133,17 @@ def summary(values: list[float]) -> dict[str, float]:
 
 
 def time_device(
-    volume: dict[str, np.ndarray], model: Path, device: str, repeats: int, concurrent: int
+    volume: dict[str, np.ndarray],
+    model: Path,
+    device: str,
+    repeats: int,
+    concurrent: int,
+    heads: str = "auto",
 ) -> dict:
     """Alternate plain and default requests ``repeats`` times each after a warm-up, then
     (``concurrent`` > 1) run default requests from that many threads at once."""
     apply_threads(), tune_malloc()  # as the service starts
-    planner = GraspPlanner.from_path(model, device)
+    planner = GraspPlanner.from_path(model, device, InferenceOptions(heads=heads))
     request = Request(planner, volume)
     steps: dict[str, list[float]] = {}
     totals: dict[str, list[float]] = {"plain request": [], "default request": []}
@@ -155,6 +162,7 @@ def time_device(
         else cpu_model(),
         "torch_threads": torch.get_num_threads(),
         "precision": str(planner.dtype).removeprefix("torch."),
+        "heads": planner.heads,
         "lanes": planner.lanes,
         "requests": {name: {**summary(values), "grasps": grasps[name]} for name, values in totals.items()},
         "steps": {name: summary(values) for name, values in steps.items()},
@@ -199,6 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     time_parser.add_argument("--device", action="append", choices=["cpu", "cuda"],
                              help="repeat for several, timed in this order (default: cpu, and cuda when there is one)")  # fmt: skip
+    time_parser.add_argument("--heads", action="append", choices=HEADS,
+                             help="where rotation and width are computed; repeat for several (default: auto)")  # fmt: skip
     time_parser.add_argument("--repeats", type=int, default=200)
     time_parser.add_argument(
         "--concurrent", type=int, default=8, help="threads of the concurrent row (1: none)"
@@ -213,7 +223,11 @@ def main(argv: list[str] | None = None) -> int:
     with np.load(args.volume) as data:
         volume = {name: data[name] for name in data.files}
     devices = args.device or (["cpu", "cuda"] if torch.cuda.is_available() else ["cpu"])
-    runs = [time_device(volume, args.model, device, args.repeats, args.concurrent) for device in devices]
+    runs = [
+        time_device(volume, args.model, device, args.repeats, args.concurrent, heads)
+        for device in devices
+        for heads in args.heads or ["auto"]
+    ]
     print(device_planning_table(runs))
     if args.json:
         payload = {

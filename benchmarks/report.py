@@ -366,7 +366,8 @@ def device_planning_table(runs: list[dict[str, Any]]) -> str:
     """One row per request, planning step and concurrent run of each device in ``runs``."""
     lines = ["| device | what | p50 ms | p95 ms | n |", "| --- | --- | ---: | ---: | ---: |"]
     for run in runs:
-        label = f"{run['device']} ({run['device_name']}, {run['precision']}, {run['torch_threads']} threads)"
+        heads = f", heads {run['heads']}" if "heads" in run else ""
+        label = f"{run['device']} ({run['device_name']}, {run['precision']}{heads}, {run['torch_threads']} threads)"
         for name, row in {**run["requests"], **run["steps"]}.items():
             shown = f"**{name}**" if name in run["requests"] else name
             lines.append(

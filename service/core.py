@@ -77,6 +77,7 @@ class PlanningService:
             settings.batch_window_ms,
             settings.max_batch,
             settings.lanes,
+            settings.heads,
         )
         return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
 

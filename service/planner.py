@@ -102,14 +102,33 @@ def default_lanes(device: torch.device) -> int:
 @dataclass(frozen=True)
 class InferenceOptions:
     """How the network runs: ``fast`` (folded, fused heads) or ``reference`` (VGN as
-    trained, float32), its precision, and micro-batching (``lanes``: parts of a batch run
-    side by side; ``None``: :func:`default_lanes`)."""
+    trained, float32), its precision, micro-batching (``lanes``: parts of a batch run
+    side by side; ``None``: :func:`default_lanes`), and where the fast form computes
+    rotation and width (``heads``, see :func:`resolve_heads`)."""
 
     form: str = "fast"
     precision: str = "auto"
     batch_window_ms: float | None = None
     max_batch: int = 32
     lanes: int | None = None
+    heads: str = "auto"
+
+
+#: Where the fast network computes rotation and width: at the voxels detection reads, on the
+#: CPU (``on-demand``), or at every voxel with the quality head (``whole``).
+HEADS = ("auto", "on-demand", "whole")
+
+
+def resolve_heads(heads: str, device: torch.device) -> str:
+    """``auto``: on demand on a CPU, where the heads' last convolution is about 40 % of the
+    network's arithmetic; whole on a GPU, where it costs next to nothing and reading a few hundred voxels
+    would instead move the features to the CPU and gather there, under Python's interpreter lock
+    that concurrent requests share."""
+    if heads not in HEADS:
+        raise ValueError(f"heads must be one of {HEADS}, got {heads!r}")
+    if heads != "auto":
+        return heads
+    return "on-demand" if device.type == "cpu" else "whole"
 
 
 class GraspPlanner:
@@ -133,6 +152,7 @@ class GraspPlanner:
         self.card = card
         self.options = options
         self.dtype = resolve_precision(options.precision, device) if options.form == "fast" else torch.float32
+        self.heads = resolve_heads(options.heads, device)
         self._network: torch.nn.Module | None = None
         if network is not None:
             network = network.eval()
@@ -165,6 +185,7 @@ class GraspPlanner:
         return {
             "inference": self.options.form,
             "precision": str(self.dtype).removeprefix("torch."),
+            "heads": self.heads if self.options.form == "fast" else "whole",
             "batch_window_ms": self.batch_window_ms,
             "max_batch": self.options.max_batch,
             "lanes": self.lanes,
@@ -228,8 +249,8 @@ class GraspPlanner:
 
     def _forward_part(self, grids: np.ndarray) -> list[NetworkOutput]:
         """The outputs of one forward pass over (B, N, N, N) grids, one per grid. Each lane
-        splits its own part, so the copies below run side by side too. The fast network runs
-        the quality head alone; rotation and width are computed where they are read."""
+        splits its own part, so the copies below run side by side too. With heads on demand the
+        fast network runs the quality head alone; rotation and width are computed where read."""
         tensor = torch.from_numpy(np.ascontiguousarray(grids))[:, None].to(self.device)
         network = self._network
         with torch.inference_mode():
@@ -239,6 +260,10 @@ class GraspPlanner:
                 return [NetworkOutput(quality[b, 0].copy(), ComputedHeads(rotation[b].copy(), width[b, 0].copy()))
                         for b in range(len(grids))]  # fmt: skip
             features = network.features(tensor)
+            if self.heads == "whole":
+                quality, rotation, width = (t.cpu().numpy() for t in network.outputs_from(features))
+                return [NetworkOutput(quality[b, 0].copy(), ComputedHeads(rotation[b].copy(), width[b, 0].copy()))
+                        for b in range(len(grids))]  # fmt: skip
             quality = network.quality_from(features).cpu().numpy()
             return [NetworkOutput(quality[b, 0].copy(), HeadsOnDemand(network, features[b].clone()))
                     for b in range(len(grids))]  # fmt: skip

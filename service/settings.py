@@ -33,6 +33,12 @@ class Settings(BaseSettings):
         description="'fast': the network folded for inference (same grasps, ~4x less arithmetic); "
         "'reference': VGN as trained, float32",
     )
+    heads: Literal["auto", "on-demand", "whole"] = Field(
+        default="auto",
+        description="where the fast form computes grasp rotation and width: 'on-demand' at the voxels "
+        "detection reads (on the CPU), 'whole' at every voxel with quality; auto: on demand on a CPU, "
+        "whole on a GPU",
+    )
     precision: Literal["auto", "fp32", "bf16"] = Field(
         default="auto", description="of the fast form; auto: bf16 on CPUs with native bf16, else fp32"
     )

@@ -10,11 +10,12 @@ from concurrent.futures import ThreadPoolExecutor
 import httpx
 import numpy as np
 import pytest
+import torch
 
 from client.connect import connect
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.planner import GraspPlanner, InferenceOptions
+from service.planner import GraspPlanner, InferenceOptions, resolve_heads
 from service.settings import PACKAGED_MODEL
 from service.vgn.batching import MicroBatcher
 from service.vgn.outputs import ComputedHeads, HeadsOnDemand
@@ -83,6 +84,29 @@ def test_rotation_and_width_on_demand_equal_the_whole_heads():
         )
         assert lazy.heads._whole is not None
         np.testing.assert_allclose(lazy.width, whole.width, atol=1e-3, rtol=1e-4)
+
+
+def test_whole_heads_give_the_same_planner_output_as_heads_on_demand():
+    """``heads="whole"`` (a GPU's default) computes rotation and width at every voxel with
+    quality; the planner's output is the same as with heads on demand (a CPU's default)."""
+    grids = [grid for _, grid in recorded_grids()]
+    on_demand = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32"))
+    whole = GraspPlanner.from_path(PACKAGED_MODEL, "cpu", InferenceOptions(precision="fp32", heads="whole"))
+    assert (on_demand.runtime()["heads"], whole.runtime()["heads"]) == ("on-demand", "whole")
+    for grid in grids:
+        lazy, computed = on_demand.infer(grid, turn_average=True), whole.infer(grid, turn_average=True)
+        assert isinstance(computed.heads, ComputedHeads) and isinstance(lazy.heads, HeadsOnDemand)
+        np.testing.assert_allclose(computed.quality, lazy.quality, atol=1e-6)
+        np.testing.assert_allclose(computed.width, lazy.width, atol=1e-4, rtol=1e-5)
+        strong = lazy.quality > 0.5
+        np.testing.assert_allclose(computed.rotation_where(strong), lazy.rotation_where(strong), atol=1e-4)
+
+
+def test_an_unknown_heads_choice_is_refused():
+    with pytest.raises(ValueError, match="heads must be one of"):
+        resolve_heads("sometimes", torch.device("cpu"))
+    assert resolve_heads("auto", torch.device("cpu")) == "on-demand"
+    assert resolve_heads("auto", torch.device("cuda")) == "whole"
 
 
 def test_orientations_at_voxels_whose_widths_were_just_read_come_from_the_same_computation():

@@ -13,11 +13,13 @@ def test_recorded_volume_is_timed_and_tabled(tmp_path: Path) -> None:
     volume = tmp_path / "volume.npz"
     assert device_planning.main(["record", "--out", str(volume)]) == 0
     out = tmp_path / "results" / "cpu-run" / "device_planning.json"
-    argv = ["time", str(volume), "--device", "cpu", "--repeats", "3", "--concurrent", "2", "--json", str(out)]
+    argv = ["time", str(volume), "--device", "cpu", "--repeats", "3", "--concurrent", "2", "--json", str(out),
+            "--heads", "auto", "--heads", "whole"]  # fmt: skip
     assert device_planning.main(argv) == 0
 
-    (run,) = json.loads(out.read_text())["runs"]
-    assert run["device"] == "cpu"
+    run, whole = json.loads(out.read_text())["runs"]
+    assert (run["device"], run["heads"], whole["heads"]) == ("cpu", "on-demand", "whole")
+    assert whole["requests"]["default request"]["grasps"] == run["requests"]["default request"]["grasps"]
     requests, steps = run["requests"], run["steps"]
     assert requests["default request"]["grasps"] > 0, "the packaged model finds grasps on the box scene"
     assert requests["default request"]["grasps"] <= requests["plain request"]["grasps"] + 2
@@ -35,5 +37,5 @@ def test_recorded_volume_is_timed_and_tabled(tmp_path: Path) -> None:
     assert run["concurrent"]["n"] == 2 * 10 and run["concurrent"]["requests_per_s"] > 0
 
     page = report.device_planning_page(out.parent.parent)
-    assert "#### `cpu-run`" in page and "**default request**" in page
+    assert "#### `cpu-run`" in page and "**default request**" in page and "heads whole" in page
     assert f"{requests['default request']['p50_ms']:.2f}" in page

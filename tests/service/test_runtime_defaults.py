@@ -71,6 +71,7 @@ def test_a_plain_start_sets_openmp_before_torch_and_reports_it(random_checkpoint
     assert runtime["omp_applied_before_torch"] is True
     assert runtime["torch_threads"] == default_threads(runtime["usable_cores"])
     assert runtime["inference"] == "fast" and runtime["precision"] in ("bfloat16", "float32")
+    assert runtime["heads"] == "on-demand"  # on a CPU
     assert runtime["malloc"]["set_by_service"] is ON_GLIBC
 
 
