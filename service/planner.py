@@ -254,16 +254,12 @@ class GraspPlanner:
         tensor = torch.from_numpy(np.ascontiguousarray(grids))[:, None].to(self.device)
         network = self._network
         with torch.inference_mode():
-            if not isinstance(network, FastVGN):
+            if not isinstance(network, FastVGN) or self.heads == "whole":
                 quality, rotation, width = (t.cpu().numpy() for t in network(tensor))
                 # Copies, so that an output a session keeps does not hold on to the whole batch.
                 return [NetworkOutput(quality[b, 0].copy(), ComputedHeads(rotation[b].copy(), width[b, 0].copy()))
                         for b in range(len(grids))]  # fmt: skip
             features = network.features(tensor)
-            if self.heads == "whole":
-                quality, rotation, width = (t.cpu().numpy() for t in network.outputs_from(features))
-                return [NetworkOutput(quality[b, 0].copy(), ComputedHeads(rotation[b].copy(), width[b, 0].copy()))
-                        for b in range(len(grids))]  # fmt: skip
             quality = network.quality_from(features).cpu().numpy()
             return [NetworkOutput(quality[b, 0].copy(), HeadsOnDemand(network, features[b].clone()))
                     for b in range(len(grids))]  # fmt: skip
