@@ -121,9 +121,10 @@ HEADS = ("auto", "on-demand", "whole")
 
 def resolve_heads(heads: str, device: torch.device) -> str:
     """``auto``: on demand on a CPU, where the heads' last convolution is about 40 % of the
-    network's arithmetic; whole on a GPU, where it costs next to nothing and reading a few hundred voxels
-    would instead move the features to the CPU and gather there, under Python's interpreter lock
-    that concurrent requests share."""
+    network's arithmetic; whole on a GPU, where that convolution costs next to nothing and reading
+    a few hundred voxels would move the features to the CPU and gather there, under the
+    interpreter lock that concurrent requests share (on an H200 whole heads made the default
+    request 1.1-1.4 ms faster)."""
     if heads not in HEADS:
         raise ValueError(f"heads must be one of {HEADS}, got {heads!r}")
     if heads != "auto":
