@@ -16,7 +16,7 @@ from training import report
 from training.card import write_card
 from training.checkpoint import CheckpointMismatch, checkpoint_path
 from training.evaluate import EvaluationConfig, executed_grasp_success
-from training.observations import ObservationSettings
+from training.observations import VIEWS, ObservationSettings
 from training.train import TEACHER_VIEWS, TrainConfig, TrainingError, TrainResult, train
 
 #: The run's defaults live on TrainConfig; the options show and use them.
@@ -150,6 +150,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=ObservationSettings.side_view_fraction,
         help="share of fresh observations that are one side view (default %(default)s)",
+    )
+    data.add_argument(
+        "--observation-views",
+        choices=VIEWS,
+        default=ObservationSettings.views,
+        help="where fresh observations' cameras stand: data generation's random views or VGN's six "
+        "evaluation views, the benchmark's (default %(default)s)",
     )
     data.add_argument(
         "--no-original",
@@ -357,6 +364,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
             noise_fraction=args.observation_noise,
             sensor=args.observation_sensor,
             side_view_fraction=args.observation_side_views,
+            views=args.observation_views,
         ),  # fmt: skip
         resume=args.resume,
         fresh=args.fresh,

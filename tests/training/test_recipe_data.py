@@ -237,7 +237,7 @@ def test_six_view_observations_are_the_evaluation_views_and_old_cache_keys_stand
     assert grids.shape == original.shape and not np.array_equal(grids, original)
 
 
-def test_a_teacher_sees_the_clean_six_views_and_the_card_says_so(raw: Path, tmp_path: Path):
+def test_teacher_and_student_see_the_six_views_and_the_card_says_so(raw: Path, tmp_path: Path):
     from service.settings import PACKAGED_MODEL
 
     data = tmp_path / "data"
@@ -245,13 +245,18 @@ def test_a_teacher_sees_the_clean_six_views_and_the_card_says_so(raw: Path, tmp_
     common = ["-m", "training.cli", "--data", str(data), "--cache", str(tmp_path / "cache"), "--epochs", "1",
               "--val-fraction", "0", "--no-progress", "--teacher", str(PACKAGED_MODEL), "--teacher-views", "six"]  # fmt: skip
     trained = run(*common, "--observations", "2", "--observation-noise", "1", "--observation-sensor",
-                  "structured-light", "--out", str(tmp_path / "w.safetensors"))  # fmt: skip
+                  "structured-light", "--observation-views", "six", "--out", str(tmp_path / "w.safetensors"))  # fmt: skip
     assert trained.returncode == 0, trained.stderr
     card = json.loads((tmp_path / "w.card.json").read_text())["training"]
     assert (
         card["distillation"]["teacher_views"] == "each scene rendered clean from VGN's six evaluation views"
     )
     assert card["observations"]["sensor"] == "structured-light" and card["observations"]["per_scene"] == 2
+    assert card["observations"]["views"] == "six"
+    student = ObservationSettings(per_scene=2, noise_fraction=1.0, sensor="structured-light", views="six")
+    assert len(list((tmp_path / "cache").glob(f"*-{student.key()}.npy"))) == 1, (
+        "the student's views were cached"
+    )
     six = ObservationSettings(
         per_scene=1, original=False, views="six", noise_fraction=0.0, side_view_fraction=0.0
     )
