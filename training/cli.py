@@ -156,7 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
         choices=VIEWS,
         default=ObservationSettings.views,
         help="where fresh observations' cameras stand: data generation's random views or VGN's six "
-        "evaluation views, the benchmark's (default %(default)s)",
+        "evaluation views, the benchmark's; six takes no side views (default %(default)s)",
     )
     data.add_argument(
         "--no-original",
