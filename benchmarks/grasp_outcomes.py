@@ -12,7 +12,8 @@ go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes).
 
 ``report`` replays the grip check (``service.grip``) on the stored grids at several alignment
 thresholds and prints, among the grasps a request without it would return (quality >= 0.8 and
-clearance-checked), how many it keeps and drops and how often each group succeeded. Choose
+clearance-checked), how many it keeps and drops and how often each group succeeded; then, for
+several preferred alignments, how often a random grasp of each look's answer succeeds. Choose
 settings on *training* objects; benchmark on held-out ones.
 """
 
@@ -135,16 +136,16 @@ def report(args: argparse.Namespace) -> int:
     for look in looks:
         grasps = look["grasps"]
         answered = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
-        measure = measure_grip(look["grid"], voxel_size, grasps[:, :3], grasps[:, 3:7])
-        measured.append((look["outcomes"] == success, answered, measure))
+        measure = measure_grip(look["grid"], voxel_size, grasps[answered, :3], grasps[answered, 3:7])
+        measured.append((look["outcomes"][answered] == success, measure))
     rows = []
     for alignment in args.alignments:
         config = GripConfig(min_alignment=alignment)
         kept, dropped = [], []
-        for held, answered, measure in measured:
+        for held, measure in measured:
             passes = measure.passes(config)
-            kept += list(held[answered & passes])
-            dropped += list(held[answered & ~passes])
+            kept += list(held[passes])
+            dropped += list(held[~passes])
         rows.append((alignment, kept, dropped))
     answered = len(rows[0][1]) + len(rows[0][2])
     everything = rows[0][1] + rows[0][2]
@@ -155,6 +156,16 @@ def report(args: argparse.Namespace) -> int:
         print(
             f"{alignment:13.2f} | {len(kept):4d} | {_percent(kept):>14} | {len(dropped):7d} | {_percent(dropped):>17}"
         )
+    print(f"\nwhere some grasps grip squarely, only those (min alignment {GripConfig().min_alignment}); over the "
+          "looks the check leaves a grasp, how often a random one of them succeeds:")  # fmt: skip
+    print("preferred alignment | looks | success % per look | grasps per look")
+    for preferred in args.preferred:
+        config = GripConfig(preferred_alignment=preferred)
+        picks = [held[measure.kept(config)] for held, measure in measured]
+        picks = [pick for pick in picks if len(pick)]
+        per_look = [float(np.mean(pick)) for pick in picks]
+        grasps = np.mean([len(pick) for pick in picks]) if picks else 0.0
+        print(f"{preferred:19.2f} | {len(picks):5d} | {_percent(per_look):>18} | {grasps:15.1f}")
     return 0
 
 
@@ -181,6 +192,8 @@ def main(argv: list[str] | None = None) -> int:
     show = commands.add_parser("report", help="the grip check's verdicts against the executed outcomes")
     show.add_argument("folder", type=Path)
     show.add_argument("--alignments", type=float, nargs="+", default=[0.4, 0.5, 0.6, 0.7])
+    show.add_argument("--preferred", type=float, nargs="+", default=[0.5, 0.6, 0.7, 0.8],
+                      help="preferred alignments to compare (0.5: no preference)")  # fmt: skip
     show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
     args = parser.parse_args(argv)
     return collect(args) if args.command == "collect" else report(args)

@@ -292,8 +292,9 @@ class GraspQuery(_Model):
         default=None,
         description="drop grasps whose closing fingers would not both meet the observed surface squarely: "
         "from each pad, rays along the closing axis must reach the fused surface and meet normals on "
-        "average within 60 degrees of the closing direction (service/grip.py); applies to both planners, "
-        "before max_grasps; about 1 ms; not applied to a volume fused from a single frame, which misleads "
+        "average within 60 degrees of the closing direction (service/grip.py); where some grasps meet "
+        "normals within about 45 degrees, only those are kept; applies to both planners, before "
+        "max_grasps; about 1 ms; not applied to a volume fused from a single frame, which misleads "
         "it. Unset: the service's default (VGN_GRIP, on unless the operator turned it off; /model runtime "
         "says); false gives the planner's unchecked grasps",
     )

@@ -15,7 +15,8 @@ Per grasp and finger this gives:
 - ``alignment``: the mean cosine between the met normals and the finger's closing direction.
 
 A grasp passes when, for *both* fingers, at least ``min_contact`` of the rays meet the surface
-and their mean alignment is at least ``min_alignment`` (:class:`GripConfig`). A finger that
+and their mean alignment is at least ``min_alignment`` (:class:`GripConfig`); where some grasps
+pass at ``preferred_alignment`` (a square grip), only those are kept. A finger that
 closes from a side no camera saw (its rays meet unobserved space or the back of a surface
 before any free space) cannot be judged and is left to the network. A volume fused from a
 single frame is not checked at all (:data:`MIN_GRIP_FRAMES`). Rays march through
@@ -57,23 +58,32 @@ SURFACE = 0.5
 @dataclass(frozen=True)
 class GripConfig:
     """Knobs of the check: the least share of each pad's rays that must meet the surface
-    (``min_contact``) and the least mean cosine between the surface normals they meet and the
-    finger's closing direction (``min_alignment``).
+    (``min_contact``), the least mean cosine between the surface normals they meet and the
+    finger's closing direction (``min_alignment``), and the cosine of a square grip
+    (``preferred_alignment``): when some grasps grip that squarely, only those are kept (at or
+    below ``min_alignment`` it changes nothing).
 
-    Defaults chosen on simulated grasps on *training* objects (pile-5 scenes of VGN's pile
-    training objects, seed 11, every grasp of quality >= 0.5 at each of the 154 looks of 33
+    ``min_alignment`` was chosen on simulated grasps on *training* objects (pile-5 scenes of VGN's
+    pile training objects, seed 11, every grasp of quality >= 0.5 at each of the 154 looks of 33
     clutter-removal rounds executed from the same state, ``python -m benchmarks.grasp_outcomes``;
     316 of them turn-averaged, clearance-checked and of quality >= 0.8, 81.3 % of which
     succeeded): a mean alignment of 0.5 (60 degrees) dropped 33 that succeeded 54.5 % of the time
     and kept 283 that succeeded 84.5 %; 0.6 dropped 102 that succeeded 70.6 % for 86.4 %.
     Requiring contact on a third of the rays only drops grasps that meet nothing.
+
+    ``preferred_alignment`` is a preference because a hard 0.7 would leave many looks with no
+    grasp at all; a robot executes one grasp per look, and beside a square grip the others are the
+    likelier to slip. It was chosen the same way, on other rounds than the benchmark's
+    (``report --preferred``; docs/concepts.md, "The grip check", has the figures).
     """
 
     min_contact: float = 1.0 / 3.0
     min_alignment: float = 0.5
+    preferred_alignment: float = 0.7
 
     def __post_init__(self) -> None:
-        if not (0.0 <= self.min_contact <= 1.0 and -1.0 <= self.min_alignment <= 1.0):
+        alignments = (self.min_alignment, self.preferred_alignment)
+        if not (0.0 <= self.min_contact <= 1.0 and all(-1.0 <= a <= 1.0 for a in alignments)):
             raise ValueError(f"invalid grip settings {self}")
 
 
@@ -95,7 +105,16 @@ class GripMeasure:
 
     def passes(self, config: GripConfig = GripConfig()) -> np.ndarray:
         """(G,) bool: every finger the volume shows meets enough surface, squarely enough."""
-        meets = (self.contact >= config.min_contact) & (self.alignment >= config.min_alignment)
+        return self._meets(config.min_contact, config.min_alignment)
+
+    def kept(self, config: GripConfig = GripConfig()) -> np.ndarray:
+        """(G,) bool: the grasps that pass and, where any grips squarely
+        (``config.preferred_alignment``), only those."""
+        square = self._meets(config.min_contact, max(config.min_alignment, config.preferred_alignment))
+        return square if square.any() else self.passes(config)
+
+    def _meets(self, min_contact: float, min_alignment: float) -> np.ndarray:
+        meets = (self.contact >= min_contact) & (self.alignment >= min_alignment)
         return np.all(meets | (self.known == 0.0), axis=1)
 
 
@@ -175,11 +194,12 @@ def gripping_grasps(
     config: GripConfig = GripConfig(),
 ) -> list[Grasp]:
     """The ``grasps`` (world frame, order kept) whose fingers both meet the surface of ``grid``
-    squarely; ``workspace_pose`` (4×4) is the grid's corner in the world."""
+    squarely enough, the squarest only where there are any (:meth:`GripMeasure.kept`);
+    ``workspace_pose`` (4×4) is the grid's corner in the world."""
     if not grasps:
         return []
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     positions = np.array([g.position for g in grasps]) @ to_workspace[:3, :3].T + to_workspace[:3, 3]
     turned = Rotation.from_matrix(to_workspace[:3, :3]) * Rotation.from_quat([g.orientation for g in grasps])
-    passes = measure_grip(grid, voxel_size, positions, turned.as_quat()).passes(config)
-    return [g for g, ok in zip(grasps, passes, strict=True) if ok]
+    kept = measure_grip(grid, voxel_size, positions, turned.as_quat()).kept(config)
+    return [g for g, ok in zip(grasps, kept, strict=True) if ok]

@@ -102,6 +102,26 @@ def test_a_finger_on_a_side_no_camera_saw_is_left_to_the_network():
     assert nothing.known.tolist() == [[0.0, 0.0]] and nothing.passes()[0], "nothing observed: no verdict"
 
 
+def test_where_some_grasps_grip_squarely_only_those_are_kept():
+    """A square wall and one tilted 55° (cosine 0.57: enough for the check, short of a square
+    grip): grasps on both keep the square one; grasps on the tilted wall alone are all kept."""
+    square, tilted = slab(0.03, 0.0), slab(0.03, 55.0)
+    grid = grid_of(lambda p: np.where(p[..., 0] < 0.15, square(p), tilted(p)))
+    origins = [np.array([x, 0.15, 0.15]) - FROM_ABOVE.apply([0.0, 0.0, 0.041]) for x in (0.08, 0.22)]
+    grasps = [
+        Grasp(position=o, orientation=FROM_ABOVE.as_quat(), approach=FROM_ABOVE.apply([0.0, 0.0, 1.0]),
+              width=0.03, quality=0.9)
+        for o in origins
+    ]  # fmt: skip
+    measure = measure_grip(grid, VOXEL, np.array(origins), np.tile(FROM_ABOVE.as_quat(), (2, 1)))
+    assert measure.passes().tolist() == [True, True]
+    assert measure.kept().tolist() == [True, False]
+    assert gripping_grasps(grasps, grid, VOXEL, np.eye(4)) == grasps[:1]
+    assert gripping_grasps(grasps[1:], grid, VOXEL, np.eye(4)) == grasps[1:], "no square grip: the rest stay"
+    no_preference = GripConfig(preferred_alignment=GripConfig().min_alignment)
+    assert gripping_grasps(grasps, grid, VOXEL, np.eye(4), no_preference) == grasps
+
+
 def test_the_thresholds_are_the_configs():
     measure = grip_at(grid_of(slab(0.03, 45.0)), (0.15, 0.15, 0.15))
     assert measure.passes(GripConfig(min_alignment=0.6)).tolist() == [True]
@@ -110,6 +130,8 @@ def test_the_thresholds_are_the_configs():
         GripConfig(min_contact=1.5)
     with pytest.raises(ValueError):
         GripConfig(min_alignment=-2.0)
+    with pytest.raises(ValueError):
+        GripConfig(preferred_alignment=1.5)
 
 
 def test_the_verdict_does_not_depend_on_the_workspace_frame():

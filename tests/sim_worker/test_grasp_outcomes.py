@@ -31,10 +31,18 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     capsys.readouterr()
     assert grasp_outcomes.main(argv) == 0, "a rerun resumes"
     assert "round 0" not in capsys.readouterr().out and stored.read_bytes() == written
-    assert grasp_outcomes.main(["report", str(out), "--alignments", "0.0", "0.5"]) == 0
+    report_argv = ["report", str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95"]
+    assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
     assert f"{len(looks)} looks" in report and "min alignment | kept" in report
+    thresholds, preferences = report.split("preferred alignment |")
     # Each threshold splits the same grasps into kept and dropped ones.
-    lines = [line.split("|") for line in report.splitlines() if line.strip().startswith(("0.00", "0.50"))]
+    lines = [line.split("|") for line in thresholds.splitlines() if line.strip().startswith(("0.00", "0.50"))]
     totals = {int(kept) + int(dropped) for _, kept, _, dropped, _ in lines}
     assert len(totals) == 1, "every threshold splits the same grasps"
+    # A preference keeps a subset of each look's answer, never none of it.
+    (_, looks_all, _, per_look_all), (_, looks_square, _, per_look_square) = [
+        line.split("|") for line in preferences.splitlines()[1:] if line.strip()
+    ]
+    assert int(looks_all) == int(looks_square)
+    assert float(per_look_square) <= float(per_look_all)

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from client.schemas import Grasp
 from service.clearance import clear_grasps
 from service.grid_surface import grid_surface_points
-from service.grip import gripping_grasps
+from service.grip import GripConfig, gripping_grasps
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.vgn.checkpoint import card_path, save_vgn, weights_id
@@ -111,7 +111,8 @@ def test_checked_soft_labels_are_zero_exactly_where_the_services_checks_drop_the
     assert 0 < zeroed.sum() < strong.sum(), "the checks drop some of the teacher's grasps, not all"
 
     # The same verdicts as the service's checks on those grasps as world-frame Grasps (the
-    # workspace at the world origin), including the clearance check's surface points.
+    # workspace at the world origin), including the clearance check's surface points. Each grasp
+    # is judged alone: the preference for square grips depends on what else a request returns.
     rows = np.flatnonzero(strong)[::7]
     quaternion = plain.quaternion[rows].astype(np.float64)
     quaternion /= np.linalg.norm(quaternion, axis=1, keepdims=True)
@@ -119,7 +120,9 @@ def test_checked_soft_labels_are_zero_exactly_where_the_services_checks_drop_the
         Grasp(position=(v * VOXEL).tolist(), orientation=q.tolist(), approach=[0.0, 0.0, 1.0], width=0.04, quality=0.9)
         for v, q in zip(plain.voxel[rows].astype(np.float64), quaternion, strict=True)
     ]  # fmt: skip
-    kept = gripping_grasps(clear_grasps(grasps, grid_surface_points(grid, VOXEL)), grid, VOXEL, np.eye(4))
+    alone = GripConfig(preferred_alignment=GripConfig().min_alignment)
+    clear = clear_grasps(grasps, grid_surface_points(grid, VOXEL))
+    kept = gripping_grasps(clear, grid, VOXEL, np.eye(4), alone)
     kept_rows = {tuple(g.position) for g in kept}
     service_drops = np.array([tuple(g.position) not in kept_rows for g in grasps])
     quality = np.ones(len(rows))
