@@ -10,7 +10,9 @@ Inputs:
 - ``docs/results/**/table.json``: ``python -m benchmarks.clutter --out FOLDER`` writes it (one row
   per planner, selection and scenario, with 95 % Wilson intervals, and the date and machine the
   rounds ran on); copy the folder, or just its ``table.json`` and ``table.md``, under
-  ``docs/results/``. Every folder becomes one table on the benchmark page.
+  ``docs/results/``. Every folder becomes one table on the benchmark page. A ``variant.md`` beside
+  it says how the service under test differed from the shipped code (a control): the benchmark page
+  shows it and the README's table leaves the folder out.
 - ``docs/results/**/latency.json``: ``python -m benchmarks.latency --json FOLDER/latency.json``.
   Every file becomes one table on the performance page.
 - ``docs/results/**/device_planning.json``: ``python -m benchmarks.device_planning time VOLUME.npz
@@ -125,6 +127,13 @@ def clutter_settings(folder: Path) -> str:
     return ""
 
 
+def variant(folder: Path) -> str:
+    """What ``variant.md`` in a results folder says the service under test changed from the
+    shipped code ("" without one): such a run is a control or an experiment, not the product."""
+    path = folder / "variant.md"
+    return " ".join(path.read_text().split()) if path.is_file() else ""
+
+
 def row_measured(row: dict[str, Any], folder: Path) -> dict[str, Any] | None:
     """When and where a row was measured: its own record, else the folder's ``measured.json``."""
     return row.get("measured") or sidecar(folder)
@@ -179,6 +188,7 @@ def clutter_page(results: Path) -> str:
         parts.append(f"#### `{relative(folder, results)}`\n")
         facts = [settings] if settings else []
         facts += [f"model {', '.join(f'`{m}`' for m in models)}"] if models else []
+        facts += [f"variant: {variant(folder)}"] if variant(folder) else []
         if facts:
             parts.append("; ".join(facts) + ".\n")
         parts.append("\n".join(clutter_table(folder, rows)) + "\n")
@@ -232,11 +242,14 @@ def shipped_model_id() -> str | None:
 def headline_table(results: Path) -> str | None:
     """The README's table: success / cleared per scenario (rows) and planner (columns), from the
     newest run of each, random selection (the paper's), next to the paper's VGN; only runs of the
-    packaged weights (and the weight-free baseline); None without results."""
+    packaged weights (and the weight-free baseline) on the shipped code (no ``variant.md``); None
+    without results."""
     cells: dict[tuple[str, str], tuple[str, str]] = {}  # (scenario, planner) -> (date, text)
     planners: list[str] = []
     shipped = shipped_model_id()
     for folder, rows in clutter_runs(results):
+        if variant(folder):
+            continue  # a control or an experiment on changed code: not what the package does
         for row in rows:
             if row.get("selection", "random") != "random" or row.get("success_rate") is None:
                 continue

@@ -196,3 +196,16 @@ def test_runs_under_other_sensors_get_their_own_rows(tmp_path: Path, monkeypatch
         line.startswith("| pile-5, structured-light sensor, camera pose error | 41.0") for line in lines
     )
     assert any(line.startswith("| pile-5, one side view | 33.0") for line in lines)
+
+
+def test_a_variant_is_named_on_the_page_and_left_out_of_the_readme(tmp_path: Path, monkeypatch):
+    """A control run on changed code (``variant.md``) is tabled with what it changed, and the
+    README's table, which shows what the package does, keeps the shipped code's figures."""
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    clutter_results(tmp_path / "a-shipped", [ROW])
+    control = clutter_results(tmp_path / "b-control", [{**ROW, "success_rate": 41.0}])
+    (control / "variant.md").write_text("the grip check\nwithout its preference\n")
+    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
+    page = report.clutter_page(tmp_path)
+    assert "variant: the grip check without its preference." in page
+    assert page.count("variant:") == 1
