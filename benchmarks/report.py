@@ -131,7 +131,7 @@ def variant(folder: Path) -> str:
     """What ``variant.md`` in a results folder says the service under test changed from the
     shipped code ("" without one): such a run is a control or an experiment, not the product."""
     path = folder / "variant.md"
-    return " ".join(path.read_text().split()) if path.is_file() else ""
+    return " ".join(path.read_text().split()).rstrip(".") if path.is_file() else ""
 
 
 def row_measured(row: dict[str, Any], folder: Path) -> dict[str, Any] | None:

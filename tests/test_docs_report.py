@@ -204,7 +204,7 @@ def test_a_variant_is_named_on_the_page_and_left_out_of_the_readme(tmp_path: Pat
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     clutter_results(tmp_path / "a-shipped", [ROW])
     control = clutter_results(tmp_path / "b-control", [{**ROW, "success_rate": 41.0}])
-    (control / "variant.md").write_text("the grip check\nwithout its preference\n")
+    (control / "variant.md").write_text("the grip check\nwithout its preference.\n")
     assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
     page = report.clutter_page(tmp_path)
     assert "variant: the grip check without its preference." in page
