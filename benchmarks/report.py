@@ -188,7 +188,8 @@ def clutter_page(results: Path) -> str:
         parts.append(f"#### `{relative(folder, results)}`\n")
         facts = [settings] if settings else []
         facts += [f"model {', '.join(f'`{m}`' for m in models)}"] if models else []
-        facts += [f"variant: {variant(folder)}"] if variant(folder) else []
+        changed = variant(folder)
+        facts += [f"variant: {changed}"] if changed else []
         if facts:
             parts.append("; ".join(facts) + ".\n")
         parts.append("\n".join(clutter_table(folder, rows)) + "\n")

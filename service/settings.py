@@ -79,7 +79,8 @@ class Settings(BaseSettings):
         default=True,
         description="grip-check requests that do not say (grip): grasps whose closing fingers would not both "
         "meet the observed surface squarely are dropped, and where some grip squarely the rest too, for "
-        "both planners; fewer grasps slip out while lifting, at about 1 ms a request; a request may still ask for grip=false",
+        "both planners; fewer grasps slip out while lifting, at about 1 ms a request; a request may still "
+        "ask for grip=false",
     )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")

@@ -15,8 +15,8 @@ grasp fails the clearance check (the open hand would touch the observed surface 
 ``service.clearance``) or the grip check (the closing fingers would not meet the surface squarely,
 ``service.grip``), its quality target is 0, as the service would drop that grasp. Each grasp is
 judged alone: the grip check's preference for square grips, which depends on the other grasps a
-request returns, is not taught. A network
-trained on them can then give in one plain pass what the default request gets from the checks.
+request returns, is not taught. A network trained on them can then give in one plain pass what
+the default request gets from the checks.
 Both checks read only the grid (the clearance check its TSDF zero crossings,
 ``service.grid_surface``), so they run on any training scene.
 """

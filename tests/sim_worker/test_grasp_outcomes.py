@@ -41,8 +41,8 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     totals = {int(kept) + int(dropped) for _, kept, _, dropped, _ in lines}
     assert len(totals) == 1, "every threshold splits the same grasps"
     # A preference keeps a subset of each look's answer, never none of it.
-    (_, looks_all, _, per_look_all), (_, looks_square, _, per_look_square) = [
+    (_, looks_all, _, grasps_all), (_, looks_square, _, grasps_square) = [
         line.split("|") for line in preferences.splitlines()[1:] if line.strip()
     ]
     assert int(looks_all) == int(looks_square)
-    assert float(per_look_square) <= float(per_look_all)
+    assert float(grasps_square) <= float(grasps_all)
