@@ -18,7 +18,7 @@ Inputs:
 - ``docs/results/**/device_planning.json``: ``python -m benchmarks.device_planning time VOLUME.npz
   --json FOLDER/device_planning.json`` (a request's planning steps on CPU and GPU; the date and
   machine are in the file).
-- ``measured.json`` beside either (``{"date": "YYYY-MM-DD", "cpu": "...", "cores": N}``): when and
+- ``measured.json`` beside either (``{"date": "YYYY-MM-DD", "time": "HH:MM:SS", "cpu": "...", "cores": N}``, UTC): when and
   where the results were measured, for files that do not record it themselves; ``--stamp FOLDER``
   writes it for this machine and today, right after a run.
 - ``service/settings.py`` (configuration), ``openapi.json`` (HTTP endpoints) and
@@ -73,10 +73,20 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine() or "unknown CPU"
 
 
-def this_machine(when: datetime.date | None = None) -> dict[str, Any]:
-    """Today's date (UTC) and this machine, as ``measured.json`` records them."""
-    day = when or datetime.datetime.now(datetime.timezone.utc).date()
-    return {"date": day.isoformat(), "cpu": cpu_model(), "cores": os.cpu_count()}
+def this_machine(when: datetime.datetime | None = None) -> dict[str, Any]:
+    """The date and time (UTC) and this machine, as ``measured.json`` records them. The time
+    orders runs of one day: the newest is the one a table shows."""
+    now = when or datetime.datetime.now(datetime.timezone.utc)
+    return {"date": now.date().isoformat(), "time": now.strftime("%H:%M:%S"), "cpu": cpu_model(),
+            "cores": os.cpu_count()}  # fmt: skip
+
+
+def measured_at(measured: dict[str, Any] | None) -> str:
+    """A sortable ``YYYY-MM-DDTHH:MM:SS`` of a record ("" when it has no date; a record without a
+    time sorts before every timed one of its day)."""
+    measured = measured or {}
+    date, time = str(measured.get("date") or ""), str(measured.get("time") or "")
+    return f"{date}T{time}" if date and time else date
 
 
 def machine_text(measured: dict[str, Any] | None) -> str:
@@ -197,9 +207,9 @@ def clutter_page(results: Path) -> str:
 
 
 def newest_date(run: tuple[Path, list[dict[str, Any]]]) -> str:
-    """The latest measured-on date of a run's rows ("" when none is recorded)."""
+    """When a run's newest row was measured (:func:`measured_at`; "" when none is recorded)."""
     folder, rows = run
-    return max((str((row_measured(row, folder) or {}).get("date") or "") for row in rows), default="")
+    return max((measured_at(row_measured(row, folder)) for row in rows), default="")
 
 
 def is_noisy(folder: Path, row: dict[str, Any]) -> bool:
@@ -245,7 +255,7 @@ def headline_table(results: Path) -> str | None:
     newest run of each, random selection (the paper's), next to the paper's VGN; only runs of the
     packaged weights (and the weight-free baseline) on the shipped code (no ``variant.md``); None
     without results."""
-    cells: dict[tuple[str, str], tuple[str, str]] = {}  # (scenario, planner) -> (date, text)
+    cells: dict[tuple[str, str], tuple[str, str]] = {}  # (scenario, planner) -> (measured at, text)
     planners: list[str] = []
     shipped = shipped_model_id()
     for folder, rows in clutter_runs(results):
@@ -257,7 +267,7 @@ def headline_table(results: Path) -> str | None:
             if row.get("model") not in (shipped, "antipodal"):
                 continue  # other weights (experiments) have their own pages
             scenario = scenario_label(folder, row)
-            date = str((row_measured(row, folder) or {}).get("date") or "")
+            date = measured_at(row_measured(row, folder))
             text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f}"
             if (scenario, row["planner"]) not in cells or date >= cells[scenario, row["planner"]][0]:
                 cells[scenario, row["planner"]] = (date, text)

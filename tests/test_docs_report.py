@@ -139,7 +139,9 @@ def test_the_clutter_benchmark_records_date_and_machine(tmp_path: Path):
     folder.mkdir()
     assert measured_on(folder) == {"date": None, "cpu": None, "cores": None}
     recorded = measured_on(folder, record=True)
-    assert recorded == report.this_machine() and recorded["cpu"] and recorded["cores"]
+    now = report.this_machine()
+    assert {k: v for k, v in recorded.items() if k != "time"} == {k: v for k, v in now.items() if k != "time"}
+    assert recorded["cpu"] and recorded["cores"] and len(recorded["time"].split(":")) == 3
     assert measured_on(folder) == recorded, "read back by --report"
 
 
@@ -209,3 +211,18 @@ def test_a_variant_is_named_on_the_page_and_left_out_of_the_readme(tmp_path: Pat
     page = report.clutter_page(tmp_path)
     assert "variant: the grip check without its preference." in page
     assert page.count("variant:") == 1
+
+
+def test_of_two_runs_on_one_day_the_readme_shows_the_later(tmp_path: Path, monkeypatch):
+    """Folder names say nothing of order: the time a run was measured decides, and a record
+    from before times were kept counts as the earliest of its day."""
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    day = ROW["measured"]["date"]
+    clutter_results(tmp_path / "a-later", [{**ROW, "measured": {**ROW["measured"], "time": "18:00:00"}}])
+    clutter_results(tmp_path / "b-earlier", [{**ROW, "success_rate": 41.0,
+                                              "measured": {**ROW["measured"], "time": "09:30:00"}}])  # fmt: skip
+    clutter_results(tmp_path / "c-untimed", [{**ROW, "success_rate": 42.0}])
+    lines = report.headline_table(tmp_path).splitlines()
+    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in lines
+    assert report.measured_at({"date": day}) < report.measured_at({"date": day, "time": "00:00:00"})
+    assert report.measured_at(None) == ""
