@@ -25,7 +25,7 @@ from service.clearance import clear_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
-from service.grip import MIN_GRIP_FRAMES, gripping_grasps
+from service.grip import MIN_GRIP_FRAMES, GripConfig, gripping_grasps
 from service.planner import (
     NO_MODEL_MESSAGE,
     GraspPlanner,
@@ -241,7 +241,8 @@ class PlanningService:
             clear = clear_grasps(grasps, surface)
             grasps, dropped = clear, len(grasps) - len(clear)
         if grid is not None:
-            gripping = gripping_grasps(grasps, grid, voxel_size, workspace_pose)
+            config = GripConfig(preferred_alignment=self.settings.grip_preferred_alignment)
+            gripping = gripping_grasps(grasps, grid, voxel_size, workspace_pose, config)
             grasps, grip_dropped = gripping, len(grasps) - len(gripping)
         grasps = grasps[: query.max_grasps]
         return GraspResult(

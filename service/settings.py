@@ -8,6 +8,8 @@ from typing import Literal
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from service.grip import GripConfig
+
 #: The packaged default model; the service uses it when ``VGN_MODEL`` is unset.
 PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
 #: ``VGN_MODEL=none``: serve without a model (the antipodal planner still works).
@@ -81,6 +83,15 @@ class Settings(BaseSettings):
         "meet the observed surface squarely are dropped, and where some grip squarely the rest too, for "
         "both planners; fewer grasps slip out while lifting, at about 1 ms a request; a request may still "
         "ask for grip=false",
+    )
+    grip_preferred_alignment: float = Field(
+        default=GripConfig().preferred_alignment,
+        ge=-1.0,
+        le=1.0,
+        description="the grip check's square grip, as the cosine between the surface normal and the closing "
+        "fingers: where some of a request's grasps grip that squarely, only those are kept (one grasp per "
+        "look is executed, and beside a square grip the others slip more often); 0.5 or less keeps every grasp "
+        "that passes the check, for clients that choose among many by reachability",
     )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")

@@ -193,6 +193,33 @@ def test_the_core_checks_every_grasp_before_max_grasps(trained):
     assert antipodal.grip_dropped is not None
 
 
+def test_the_operator_sets_the_square_grip(trained):
+    """``VGN_GRIP_PREFERRED_ALIGNMENT`` reaches the check: set between the alignments of the box's
+    grasps, it keeps only the squarer ones; at the minimum alignment, every grasp that passes."""
+    session = fused_session(trained)
+    unchecked = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=False)).grasps
+    passing = gripping_grasps(
+        unchecked, trained.grid(session), VOXEL, np.eye(4), GripConfig(preferred_alignment=0.5)
+    )
+    measure = measure_grip(trained.grid(session), VOXEL, np.array([g.position for g in passing]),
+                           np.array([g.orientation for g in passing]))  # fmt: skip
+    squareness = np.where(measure.known > 0, measure.alignment, 1.0).min(axis=1)  # of the fingers it judges
+    between = float(np.sort(squareness)[len(squareness) // 2])
+    squarer = [g for g, square in zip(passing, squareness >= between, strict=True) if square]
+    for preferred, expected in ((0.5, passing), (between, squarer)):
+        core = PlanningService.from_settings(
+            Settings(model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred)
+        )
+        try:
+            session = fused_session(core)
+            assert core.plan(session, GraspQuery(threshold=0.0, clearance=False)).grasps == expected
+        finally:
+            core.close()
+    assert 0 < len(expected) < len(passing)
+    with pytest.raises(ValueError):
+        Settings(grip_preferred_alignment=1.5)
+
+
 def test_a_volume_of_one_frame_is_not_checked(trained):
     """From one view the fused surface misleads the check: it runs from the second frame on."""
     session = trained.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
