@@ -267,10 +267,10 @@ def headline_table(results: Path) -> str | None:
             if row.get("model") not in (shipped, "antipodal"):
                 continue  # other weights (experiments) have their own pages
             scenario = scenario_label(folder, row)
-            date = measured_at(row_measured(row, folder))
+            when = measured_at(row_measured(row, folder))
             text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f}"
-            if (scenario, row["planner"]) not in cells or date >= cells[scenario, row["planner"]][0]:
-                cells[scenario, row["planner"]] = (date, text)
+            if (scenario, row["planner"]) not in cells or when >= cells[scenario, row["planner"]][0]:
+                cells[scenario, row["planner"]] = (when, text)
             if row["planner"] not in planners:
                 planners.append(row["planner"])
     if not cells:

@@ -56,6 +56,7 @@ class PlanningService:
     def __init__(self, settings: Settings, planner: GraspPlanner) -> None:
         self.settings = settings
         self.planner = planner
+        self.grip_config = GripConfig(preferred_alignment=settings.grip_preferred_alignment)
         self.sessions = SessionStore(
             settings.max_sessions,
             settings.session_ttl_s,
@@ -241,8 +242,7 @@ class PlanningService:
             clear = clear_grasps(grasps, surface)
             grasps, dropped = clear, len(grasps) - len(clear)
         if grid is not None:
-            config = GripConfig(preferred_alignment=self.settings.grip_preferred_alignment)
-            gripping = gripping_grasps(grasps, grid, voxel_size, workspace_pose, config)
+            gripping = gripping_grasps(grasps, grid, voxel_size, workspace_pose, self.grip_config)
             grasps, grip_dropped = gripping, len(grasps) - len(gripping)
         grasps = grasps[: query.max_grasps]
         return GraspResult(

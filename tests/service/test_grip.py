@@ -205,7 +205,8 @@ def test_the_operator_sets_the_square_grip(trained):
                            np.array([g.orientation for g in passing]))  # fmt: skip
     squareness = np.where(measure.known > 0, measure.alignment, 1.0).min(axis=1)  # of the fingers it judges
     between = float(np.sort(squareness)[len(squareness) // 2])
-    squarer = [g for g, square in zip(passing, squareness >= between, strict=True) if square]
+    kept = measure.kept(GripConfig(preferred_alignment=between))
+    squarer = [g for g, square in zip(passing, kept, strict=True) if square]
     for preferred, expected in ((0.5, passing), (between, squarer)):
         core = PlanningService.from_settings(
             Settings(model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred)
