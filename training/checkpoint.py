@@ -44,6 +44,12 @@ def checkpoint_path(out: Path) -> Path:
     return out.with_suffix(".ckpt.pt")
 
 
+def teacher_targets_path(out: Path) -> Path:
+    """``vgn.safetensors`` → ``vgn.teacher.npz`` beside it: the teacher's soft labels, kept for
+    a resume."""
+    return out.with_suffix(".teacher.npz")
+
+
 def capture_rng() -> dict[str, Any]:
     """The torch (and CUDA) random states, so a resumed run draws what an uninterrupted one would."""
     state: dict[str, Any] = {"torch": torch.get_rng_state()}

@@ -37,7 +37,9 @@ training and validation by scene, fixed by --seed; validation uses every label.
 
 Writes OUT (.safetensors weights for the service: VGN_MODEL=OUT), OUT's .card.json (model
 card: data, settings, metrics, command, code version) and OUT's .ckpt.pt (the training
-state after each epoch, for --resume).
+state after each epoch, for --resume). With --teacher, OUT's .teacher.npz keeps the teacher's
+soft labels, so a --resume with the same teacher and data does not work them out again
+(delete it once the run is finished: it takes about 15 bytes a soft label).
 """
 
 EPILOG = """\

@@ -19,12 +19,20 @@ request returns, is not taught. A network trained on them can then give in one p
 the default request gets from the checks.
 Both checks read only the grid (the clearance check its TSDF zero crossings,
 ``service.grid_surface``), so they run on any training scene.
+
+Working the targets out takes minutes on a large dataset (10 on a CPU for 11,000 scenes), so a
+run saves them beside its checkpoint and a resume reads them back when nothing they depend on
+changed (:func:`teaching_key`).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +45,7 @@ from service.grip import measure_grip
 from service.planner import GraspPlanner, InferenceOptions
 from service.vgn.detection import grasp_region
 from training.labels import LabelSet
+from vgn_data.files import atomic_writer
 
 
 @dataclass(frozen=True)
@@ -129,3 +138,61 @@ def teach(
     if len(sizes) != len(grids):
         raise ValueError(f"{len(grids)} grids but {len(sizes)} voxel sizes")
     return [soft_targets(teacher, source.load(), size) for source, size in zip(bar, sizes, strict=True)]
+
+
+#: Bump when what a teacher's soft targets mean changes (the turn averaging, the checks, the
+#: grasp region), so that saved targets stop matching.
+TARGETS_FORMAT = 1
+
+
+def teaching_key(weights: Path, grids: Sequence[object], voxel_sizes: Sequence[float] | None = None) -> str:
+    """Hash of everything :func:`teach` reads: the teacher's weights, every grid's content in
+    order, the voxel sizes the checks use, and :data:`TARGETS_FORMAT`. Reading each grid costs
+    seconds where teaching costs minutes."""
+    digest = hashlib.sha256()
+    digest.update(Path(weights).read_bytes())
+    sizes = None if voxel_sizes is None else [float(size) for size in voxel_sizes]
+    settings = {"format": TARGETS_FORMAT, "checked_quality": CHECKED_QUALITY, "voxel_sizes": sizes}
+    digest.update(json.dumps(settings, sort_keys=True).encode())
+    for source in grids:
+        digest.update(np.ascontiguousarray(source.load(), dtype=np.float32).tobytes())
+    return digest.hexdigest()
+
+
+def save_targets(path: Path, key: str, targets: Sequence[SoftTargets]) -> None:
+    """Write every scene's targets to one file (atomically), under ``key``."""
+    with atomic_writer(path) as stream:
+        np.savez(
+            stream,
+            key=np.array(key),
+            counts=np.array([len(target) for target in targets], dtype=np.int64),
+            voxel=_joined([target.voxel for target in targets], (0, 3), np.uint8),
+            quality=_joined([target.quality for target in targets], (0,), np.float16),
+            quaternion=_joined([target.quaternion for target in targets], (0, 4), np.float16),
+            width=_joined([target.width for target in targets], (0,), np.float16),
+        )
+
+
+def load_targets(path: Path, key: str) -> list[SoftTargets] | None:
+    """The targets saved at ``path`` when they were saved under ``key``; None when the file is
+    missing, damaged or was made from another teacher or other grids."""
+    try:
+        with np.load(path) as data:
+            if str(data["key"]) != key:
+                return None
+            counts = data["counts"]
+            arrays = [data[name] for name in ("voxel", "quality", "quaternion", "width")]
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    if any(len(array) != bounds[-1] for array in arrays):
+        return None
+    voxel, quality, quaternion, width = arrays
+    return [
+        SoftTargets(voxel[start:end], quality[start:end], quaternion[start:end], width[start:end])
+        for start, end in pairwise(bounds.tolist())
+    ]
+
+
+def _joined(parts: list[np.ndarray], empty: tuple[int, ...], dtype: type) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros(empty, dtype=dtype)

@@ -37,6 +37,7 @@ from training.checkpoint import (
     load_state,
     restore_rng,
     save_state,
+    teacher_targets_path,
 )
 from training.dataset import (
     DatasetSummary,
@@ -49,7 +50,7 @@ from training.dataset import (
     split_scenes,
     subsample_scenes,
 )
-from training.distill import CHECKED_QUALITY, SoftTargets, teach
+from training.distill import CHECKED_QUALITY, SoftTargets, load_targets, save_targets, teach, teaching_key
 from training.grids import MAX_DEPTH, RESOLUTION
 from training.loss import distillation_loss, gather, per_label_loss
 from training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
@@ -371,7 +372,8 @@ def _teacher_targets(
     config: TrainConfig, scenes: list[Scene], device: torch.device, log: Callable[[str], None]
 ) -> list[SoftTargets] | None:
     """The teacher's soft labels for every training scene, or None without a teacher. They are
-    worked out again on resume (the same weights give the same targets), not stored."""
+    saved beside the checkpoint and read back on resume while the teacher and the grids are
+    unchanged; otherwise worked out again."""
     if config.teacher is None:
         return None
     started = time.perf_counter()
@@ -380,14 +382,22 @@ def _teacher_targets(
         if config.teacher_views == "original"
         else _six_view_sources(config, scenes)
     )
-    try:
-        sizes = [scene.voxel_size for scene in scenes] if config.teacher_checks else None
-        soft = teach(Path(config.teacher), sources, str(device), config.progress, sizes)
-    except CheckpointError as error:
-        raise TrainingError(f"--teacher: {error}") from None
+    sizes = [scene.voxel_size for scene in scenes] if config.teacher_checks else None
+    saved = teacher_targets_path(config.out)
+    key = teaching_key(Path(config.teacher), sources, sizes)
+    soft = load_targets(saved, key)
+    if soft is None:
+        try:
+            soft = teach(Path(config.teacher), sources, str(device), config.progress, sizes)
+        except CheckpointError as error:
+            raise TrainingError(f"--teacher: {error}") from None
+        save_targets(saved, key, soft)
+        how = "worked out"
+    else:
+        how = f"read from {saved.name}"
     log(
         f"teacher {weights_id(Path(config.teacher))}: {sum(map(len, soft))} soft labels in "
-        f"{len(soft)} scenes ({time.perf_counter() - started:.0f} s)"
+        f"{len(soft)} scenes, {how} ({time.perf_counter() - started:.0f} s)"
     )
     return soft
 

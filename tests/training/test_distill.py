@@ -23,12 +23,22 @@ from tests.helpers.datasets import VOXEL, N, make_dataset
 from tests.helpers.grids import recorded_grids
 from training.augment import Placement
 from training.cli import main
-from training.dataset import Sample, SceneDataset, collate, load_scenes
-from training.distill import CHECKED_QUALITY, SoftTargets, failing_checks, soft_targets
+from training.dataset import PackedGrid, Sample, SceneDataset, collate, load_scenes
+from training.distill import (
+    CHECKED_QUALITY,
+    SoftTargets,
+    failing_checks,
+    load_targets,
+    save_targets,
+    soft_targets,
+    teach,
+    teaching_key,
+)
 from training.grids import MAX_DEPTH, RESOLUTION
 from training.labels import LabelSet
 from training.loss import distillation_loss
 from training.quaternions import flipped
+from training.shards import quantize
 from vgn_data.dataset import RawDataset
 
 
@@ -233,6 +243,7 @@ def test_a_run_with_a_teacher_records_it_and_resumes_only_with_it(raw: RawDatase
     assert "--teacher-checks needs --teacher" in capsys.readouterr().err
 
     assert main([*args, "--epochs", "1", "--teacher", str(weights), "--soft-per-draw", "64"]) == 0
+    assert "worked out" in capsys.readouterr().out
     card = json.loads(card_path(out).read_text())
     distillation = card["training"]["distillation"]
     assert (
@@ -248,10 +259,43 @@ def test_a_run_with_a_teacher_records_it_and_resumes_only_with_it(raw: RawDatase
     assert main([*args, "--epochs", "2", "--resume", "--teacher", str(other)]) == 2
     assert "teacher" in capsys.readouterr().err
     assert main([*args, "--epochs", "2", "--resume", "--teacher", str(weights), "--soft-per-draw", "64"]) == 0
+    assert "read from vgn.teacher.npz" in capsys.readouterr().out, "a resume reads the saved soft labels"
     # The checks change the targets: a run without them does not resume with them.
     checked = [*args, "--epochs", "3", "--resume", "--teacher", str(weights), "--soft-per-draw", "64"]
     assert main([*checked, "--teacher-checks"]) == 2
     assert "teacher_checks" in capsys.readouterr().err
+
+
+def test_saved_soft_labels_are_read_back_only_for_the_same_teacher_and_grids(tmp_path: Path):
+    """A resume skips the teacher only when its answer could not differ: same weights, same grids
+    in the same order, same checks. A damaged file is worked out again, not trusted."""
+    grids = [PackedGrid(quantize(grid)) for _, grid in recorded_grids()[:3]]
+    targets = teach(PACKAGED_MODEL, grids, "cpu", progress=False)
+    key = teaching_key(PACKAGED_MODEL, grids)
+    path = tmp_path / "vgn.teacher.npz"
+    save_targets(path, key, targets)
+
+    read = load_targets(path, key)
+    assert read is not None and len(read) == len(targets)
+    for saved, original in zip(read, targets, strict=True):
+        for name in ("voxel", "quality", "quaternion", "width"):
+            assert np.array_equal(getattr(saved, name), getattr(original, name))
+
+    other_weights = tmp_path / "other.safetensors"
+    save_vgn(VGN(), other_weights)
+    changed = [grids[0], grids[2], grids[1]]
+    for other_key in (
+        teaching_key(other_weights, grids),
+        teaching_key(PACKAGED_MODEL, changed),
+        teaching_key(PACKAGED_MODEL, grids[:2]),
+        teaching_key(PACKAGED_MODEL, grids, [VOXEL] * 3),
+    ):
+        assert other_key != key and load_targets(path, other_key) is None
+    assert teaching_key(PACKAGED_MODEL, grids) == key, "the key is a function of its inputs"
+
+    path.write_bytes(path.read_bytes()[:1000])
+    assert load_targets(path, key) is None
+    assert load_targets(tmp_path / "missing.npz", key) is None
 
 
 def test_a_run_with_checked_targets_records_them(raw: RawDataset, tmp_path: Path):
