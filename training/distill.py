@@ -43,6 +43,7 @@ from service.clearance import approach_is_clear
 from service.grid_surface import grid_surface_points
 from service.grip import measure_grip
 from service.planner import GraspPlanner, InferenceOptions
+from service.vgn.checkpoint import weights_id
 from service.vgn.detection import grasp_region
 from training.labels import LabelSet
 from vgn_data.files import atomic_writer
@@ -149,10 +150,10 @@ def teaching_key(weights: Path, grids: Sequence[object], voxel_sizes: Sequence[f
     """Hash of everything :func:`teach` reads: the teacher's weights, every grid's content in
     order, the voxel sizes the checks use, and :data:`TARGETS_FORMAT`. Reading each grid costs
     seconds where teaching costs minutes."""
-    digest = hashlib.sha256()
-    digest.update(Path(weights).read_bytes())
     sizes = None if voxel_sizes is None else [float(size) for size in voxel_sizes]
-    settings = {"format": TARGETS_FORMAT, "checked_quality": CHECKED_QUALITY, "voxel_sizes": sizes}
+    settings = {"format": TARGETS_FORMAT, "teacher": weights_id(Path(weights)),
+                "checked_quality": CHECKED_QUALITY, "voxel_sizes": sizes}  # fmt: skip
+    digest = hashlib.sha256()
     digest.update(json.dumps(settings, sort_keys=True).encode())
     for source in grids:
         digest.update(np.ascontiguousarray(source.load(), dtype=np.float32).tobytes())
