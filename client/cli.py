@@ -178,6 +178,17 @@ def _add_generate_data(commands: argparse._SubParsersAction[argparse.ArgumentPar
         default=0.0,
         help="share of scenes seen from one side view instead of 1-6 views from above (default %(default)s)",
     )
+    gen.add_argument(
+        "--answer-grasps",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also label up to K of the service's own plain answers per scene (network only, drawn at random "
+        "among those reaching --answer-threshold), each tried once as answered: the network's mistakes "
+        "become labels where it makes them (default 0: none)",
+    )
+    gen.add_argument("--answer-threshold", type=float, default=0.5, metavar="T",
+                     help="quality the labelled answers must reach (default %(default)s)")  # fmt: skip
 
     clean = commands.add_parser(
         "clean-data",

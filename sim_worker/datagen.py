@@ -4,6 +4,11 @@ Per scene: build a pile or packed scene, render 1-6 random views, post them to a
 read the fused grid (to skip scenes where nothing was observed) and the point cloud with
 normals back from the service, and label 120 grasp points by trying 6 yaws each in simulation. The output is VGN's raw layout (vgn_data.dataset).
 
+Random surface points rarely land where the network is confidently wrong, and those are the grasps a
+plain request executes. ``answer_grasps`` also labels up to that many of the service's own plain
+answers per scene (its network alone, no turn averaging or checks), each tried once as answered:
+its mistakes become negatives exactly where it makes them.
+
 A share of scenes can be observed the way a real sensor sees them (``noise_fraction``: Dex-Net
 depth noise; ``side_view_fraction``: one view from the side instead of 1-6 from above), so a
 model trained on the data survives them. Which scenes do is drawn from the seed alone.
@@ -11,6 +16,7 @@ model trained on the data survives them. Which scenes do is drawn from the seed 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -60,15 +66,30 @@ class DataGenConfig:
     noise: bool = False  # every scene noisy (same as noise_fraction=1)
     noise_fraction: float = 0.0  # share of scenes rendered with depth noise
     side_view_fraction: float = 0.0  # share of scenes seen from one side view only
+    answer_grasps: int = 0  # of the service's plain answers per scene, labelled as answered
+    answer_threshold: float = 0.5  # the quality those answers must reach
+    answer_model: str | None = None  # weights id of the model expected to answer
     renderer: Renderer = "auto"
 
     def __post_init__(self) -> None:
         check_choice("scene", self.scene, DataScene)
         check_choice("renderer", self.renderer, Renderer)
-        for name in ("points_per_scene", "yaws", "max_views"):
+        for name in ("yaws", "max_views"):
             check_at_least(name, getattr(self, name), 1)
-        for name in ("noise_fraction", "side_view_fraction"):
+        check_at_least("answer_grasps", self.answer_grasps, 0)
+        # Answer-only scenes (no random points) are allowed: the network's answers are the labels.
+        check_at_least("points_per_scene", self.points_per_scene, 0 if self.answer_grasps else 1)
+        for name in ("noise_fraction", "side_view_fraction", "answer_threshold"):
             check_fraction(name, getattr(self, name))
+
+    def recorded(self) -> dict:
+        """The settings a resumed run must match (generation.json); the answer-labelling ones only
+        when it is on, so folders made before it existed still resume."""
+        settings = {k: v for k, v in dataclasses.asdict(self).items() if k != "renderer"}
+        settings["objects"] = list(settings["objects"])
+        if not self.answer_grasps:
+            del settings["answer_grasps"], settings["answer_threshold"], settings["answer_model"]
+        return settings
 
     def scene_conditions(self, index: int) -> tuple[bool, bool]:
         """(noisy, side view) for scene ``index``: drawn from the seed alone, so a scene is
@@ -217,8 +238,11 @@ class SceneLabeller:
         try:
             rows = [self._label_point(candidates[int(rng.integers(len(candidates)))], rng, state)
                     for _ in range(self.config.points_per_scene)]  # fmt: skip
+            rows += self._label_answers(rng, state)
         finally:
             self.world.discard_state(state)
+        if not rows:
+            return None  # answer-only and the network answered nothing: no labels
         return views, np.asarray(rows), recipe
 
     def _observe(self, built: BuiltScene) -> SceneViews:
@@ -227,6 +251,33 @@ class SceneLabeller:
         for depth, pose in zip(depths, built.camera_poses, strict=True):
             self.vgn.add_frame(self.session_id, depth, pose)
         return SceneViews(depths, np.stack(built.camera_poses))
+
+    def _label_answers(self, rng: np.random.Generator, state: int) -> list[np.ndarray]:
+        """Rows for up to ``answer_grasps`` of the service's plain answers, drawn at random among all
+        that reach ``answer_threshold`` (as a randomly selecting robot would), each tried once with the
+        orientation answered; a failure keeps the maximum opening as its width, like point labels."""
+        if not self.config.answer_grasps:
+            return []
+        answer = self.vgn.grasps(self.session_id, threshold=self.config.answer_threshold, turn_average=False,
+                                 clearance=False, grip=False)  # fmt: skip
+        if self.config.answer_model is not None and answer.model != self.config.answer_model:
+            raise RuntimeError(f"the service answers with model {answer.model}, but this run labels the "
+                               f"answers of {self.config.answer_model}; restart it with those weights")  # fmt: skip
+        inside = [g for g in answer.grasps
+                  if np.all((np.asarray(g.position) >= VALID_LOWER) & (np.asarray(g.position) <= VALID_UPPER))]  # fmt: skip
+        count = min(self.config.answer_grasps, len(inside))
+        rows = []
+        for i in rng.permutation(len(inside))[:count]:
+            pose = inside[int(i)].as_matrix()
+            self.world.restore_state(state)
+            trial = execute_grasp(self.world, self.gripper, pose, allow_contact=False, remove_grasped=False,
+                                  fast=True)  # fmt: skip
+            self.trial_seconds += trial.seconds
+            self.trials += 1
+            width = trial.width if trial.label else self.gripper.spec.max_opening
+            quaternion = Rotation.from_matrix(pose[:3, :3]).as_quat()
+            rows.append(np.r_[quaternion, pose[:3, 3], width, trial.label])
+        return rows
 
     def _label_point(self, point_normal: np.ndarray, rng: np.random.Generator, state: int) -> np.ndarray:
         spec: GripperSpec = self.gripper.spec

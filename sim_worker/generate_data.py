@@ -57,6 +57,8 @@ def run(args: argparse.Namespace) -> int:
         config = DataGenConfig(scene=args.scene, objects=tuple(args.objects or ()), seed=args.seed,
                                points_per_scene=args.points, noise=args.noise,
                                noise_fraction=args.noise_fraction, side_view_fraction=args.side_view_fraction,
+                               answer_grasps=getattr(args, "answer_grasps", 0),
+                               answer_threshold=getattr(args, "answer_threshold", 0.5),
                                renderer=args.renderer)  # fmt: skip
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
@@ -67,21 +69,25 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    settings = {k: v for k, v in dataclasses.asdict(config).items() if k != "renderer"}
-    settings["objects"] = list(settings["objects"])
-    # Labels are what this hand can do: a folder made with another hand is never resumed into.
-    settings["gripper"] = GRIPPER_VERSION
-    try:
-        check_settings(out / "generation.json", settings)
-    except ValueError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 2
+    if not config.answer_grasps:  # answer runs are checked once the answering model is known
+        failed = _check_settings(out, config)
+        if failed:
+            return failed
     for leftover in remove_stale_temporaries(out):
         print(f"removed {leftover}, left by a killed writer", file=sys.stderr)
     done = dataset.done_scene_ids()
     indices = range(first, first + args.scenes)
     todo = [i for i in indices if scene_id(args.seed, i) not in done]
-    if getattr(args, "ray", None) is not None:  # the scenes spread over a Ray cluster instead
+    ray = getattr(args, "ray", None) is not None
+    if ray and config.answer_grasps and args.url is None:
+        print("error: --answer-grasps with --ray needs --url: one service whose model's answers are labelled",
+              file=sys.stderr)  # fmt: skip
+        return 2
+    if ray and config.answer_grasps:
+        config, failed = _with_answer_model(args.url, args.api_key, out, config)
+        if failed:
+            return failed
+    if ray:  # the scenes spread over a Ray cluster instead
         from sim_worker.ray_runner import generate_on_ray
 
         return generate_on_ray(args, config, dataset, todo)
@@ -98,6 +104,10 @@ def run(args: argparse.Namespace) -> int:
             except (RuntimeError, TimeoutError) as error:
                 print(f"error: {error}", file=sys.stderr)
                 return 2
+        if config.answer_grasps:
+            config, failed = _with_answer_model(url, args.api_key, out, config)
+            if failed:
+                return failed
         grasps, seconds = _run_workers(url, args, config, todo)
     per_worker = grasps / seconds / args.workers if seconds else 0.0
     print(
@@ -105,6 +115,36 @@ def run(args: argparse.Namespace) -> int:
         f"({args.workers} worker(s), {1 / per_worker if per_worker else float('nan'):.3f} s per grasp point per worker)"
     )
     return 0
+
+
+def _check_settings(out: Path, config: DataGenConfig) -> int:
+    """Record the run's settings, or refuse to resume a folder made with others; the exit status."""
+    settings = config.recorded()
+    # Labels are what this hand can do: a folder made with another hand is never resumed into.
+    settings["gripper"] = GRIPPER_VERSION
+    try:
+        check_settings(out / "generation.json", settings)
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _with_answer_model(
+    url: str, api_key: str | None, out: Path, config: DataGenConfig
+) -> tuple[DataGenConfig, int]:
+    """``config`` naming the weights the service at ``url`` answers with, its settings checked: a
+    folder holds one model's answers, so a resume with other weights is refused."""
+    from client.connect import connect
+
+    with connect(url, api_key=api_key, timeout=120.0) as vgn:
+        info = vgn.model()
+    if not info.loaded or info.model_id is None:
+        print(f"error: --answer-grasps labels the network's answers, but the service has no model ({info.detail})",
+              file=sys.stderr)  # fmt: skip
+        return config, 2
+    config = dataclasses.replace(config, answer_model=info.model_id)
+    return config, _check_settings(out, config)
 
 
 def _run_workers(

@@ -93,6 +93,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(validation unchanged): points of a learning curve (default: all)",
     )
     data.add_argument(
+        "--source",
+        dest="sources",
+        metavar="NAME",
+        action="append",
+        help="recipe folders: train on this source's scenes only (e.g. pile-answers; `vgn-data pack --source` "
+        "named it); repeat for several (default: every source)",
+    )
+    data.add_argument(
         "--resolution",
         metavar="N",
         type=int,
@@ -342,6 +350,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
         batch_scenes=args.batch_scenes,
         val_fraction=args.val_fraction,
         max_train_scenes=args.max_train_scenes,
+        sources=tuple(args.sources) if args.sources else None,
         seed=args.seed,
         device=args.device,
         cache=args.cache,

@@ -126,23 +126,27 @@ def load_scenes(
     observations: ObservationSettings | None = None,
     workers: int = 0,
     progress: bool = False,
+    sources: tuple[str, ...] | None = None,
 ) -> tuple[list[Scene], list[DatasetSummary]]:
     """Scenes with at least one label inside the grid, in a stable order, and per-dataset counts.
 
     A folder is a raw dataset, a folder of scene recipes (``manifest.json`` format 2: the
     observations ``observations`` asks for are rendered into ``cache_root`` first, where
-    missing) or of grid shards (format 1; its grids were fused when packed). Raises
-    ``FileNotFoundError`` for a folder that is none of them.
+    missing) or of grid shards (format 1; its grids were fused when packed). ``sources``: of a
+    recipe folder only these streams of scenes (``ValueError`` for a name no recipe folder has).
+    Raises ``FileNotFoundError`` for a folder that is none of them.
     """
     scenes: list[Scene] = []
     summaries: list[DatasetSummary] = []
+    found: set[str] = set()
     for index, data_dir in enumerate(data_dirs):
         if RecipeFolder(Path(data_dir)).exists():
             settings = observations or ObservationSettings()
-            rendered, summary = _load_recipes(index, Path(data_dir), resolution, max_depth, settings,
-                                              cache_root, workers, progress)  # fmt: skip
+            rendered, summary, names = _load_recipes(index, Path(data_dir), resolution, max_depth, settings,
+                                                     cache_root, workers, progress, sources)  # fmt: skip
             scenes += rendered
             summaries.append(summary)
+            found |= names
             continue
         if ShardFolder(Path(data_dir)).exists():
             packed, summary = _load_packed(index, Path(data_dir), resolution, max_depth)
@@ -166,6 +170,10 @@ def load_scenes(
             source = GridSource(dataset, scene_id, grids_dir / f"{scene_id}.npz", resolution, max_depth, key)
             scenes.append(Scene(index, scene_id, source, labels, voxel_size))
         summaries.append(summary)
+    missing = sorted(set(sources or ()) - found)
+    if missing:
+        raise ValueError(f"no recipe folder among {', '.join(map(str, data_dirs))} has the source(s) "
+                         f"{', '.join(missing)}; it has: {', '.join(sorted(found)) or 'none'}")  # fmt: skip
     return scenes, summaries
 
 
@@ -217,14 +225,18 @@ def _load_recipes(
     cache_root: Path | None,
     workers: int,
     progress: bool,
-) -> tuple[list[Scene], DatasetSummary]:
-    """Scenes of a recipe folder with their rendered observations (rendered now where missing)."""
+    sources: tuple[str, ...] | None = None,
+) -> tuple[list[Scene], DatasetSummary, set[str]]:
+    """Scenes of a recipe folder (of ``sources``, or all) with their rendered observations (rendered
+    now where missing), and the names of every source the folder has."""
     recipes = RecipeFolder(folder)
     manifest = recipes.manifest()
     _check_grid(folder, manifest, resolution, max_depth)
     shards = recipes.load(verify=True)
+    names = {shard.source for shard in shards}
+    shards = [shard for shard in shards if sources is None or shard.source in sources]
     cache = Path(cache_root) if cache_root is not None else default_cache_dir() / "observations"
-    bar = tqdm(total=sum(e["scenes"] for e in manifest["shards"]), desc="observations", unit="scene",
+    bar = tqdm(total=sum(len(shard.scene_ids) for shard in shards), desc="observations", unit="scene",
                disable=not progress, leave=False)  # fmt: skip
     try:
         paths = render_cache(folder, cache, settings, max(1, workers), progress=bar.update, shards=shards)
@@ -240,7 +252,7 @@ def _load_recipes(
             labels = _admit(summary, rows, voxel_size, resolution)
             if labels is not None:
                 scenes.append(Scene(index, scene_id, RenderedObservations(grids, row), labels, voxel_size))
-    return scenes, summary
+    return scenes, summary, names
 
 
 def _group_rows(ids: list[str], rows: np.ndarray) -> list[tuple[str, np.ndarray]]:

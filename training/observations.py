@@ -189,16 +189,16 @@ def render_cache(
 ) -> list[Path]:
     """Render the observations of every shard of ``data`` whose cache file is missing; returns
     every shard's cache file. A file is written whole (atomically) once its shard is done.
-    ``shards``: the folder's shards, when the caller has loaded them already."""
+    ``shards``: the folder's shards (or some of them), when the caller has loaded them already."""
     folder = RecipeFolder(data)
-    manifest = folder.manifest()
+    entries = {entry["file"]: entry for entry in folder.manifest()["shards"]}
     shards = folder.load() if shards is None else shards
     paths = []
     context = multiprocessing.get_context("spawn")  # PyBullet and fork do not mix
     with ProcessPoolExecutor(workers, mp_context=context, initializer=_start_worker,
                              initargs=(settings, vgn_objects)) as pool:  # fmt: skip
-        for entry, shard in zip(manifest["shards"], shards, strict=True):
-            path = cache_path(cache, entry["sha256"], settings)
+        for shard in shards:
+            path = cache_path(cache, entries[shard.file]["sha256"], settings)
             paths.append(path)
             if path.is_file():
                 continue

@@ -84,6 +84,8 @@ class TrainConfig:
     val_fraction: float = 0.1
     #: train on this many of the training scenes (a nested subset; validation unchanged): learning curves
     max_train_scenes: int | None = None
+    #: of recipe folders, only these sources' scenes (None: every source)
+    sources: tuple[str, ...] | None = None
     seed: int = 0
     device: str = "auto"
     cache: Path | None = None
@@ -192,8 +194,12 @@ def train(
         raise TrainingError("--device cuda was asked for but torch sees no CUDA GPU")
     torch.manual_seed(config.seed)
 
-    scenes, summaries = load_scenes(config.data, config.resolution, config.max_depth, config.cache,
-                                    config.observations, config.workers, config.progress)  # fmt: skip
+    try:
+        scenes, summaries = load_scenes(config.data, config.resolution, config.max_depth, config.cache,
+                                        config.observations, config.workers, config.progress,
+                                        config.sources)  # fmt: skip
+    except ValueError as error:
+        raise TrainingError(str(error)) from error
     if not scenes:
         raise TrainingError(f"no labelled scenes inside the grid in {', '.join(map(str, config.data))}")
     train_scenes, val_scenes = split_scenes(scenes, config.val_fraction, config.seed)
@@ -416,7 +422,7 @@ def _six_view_sources(config: TrainConfig, scenes: list[Scene]) -> list[Any]:
     """Each scene's clean six-view observation (rendered into the cache where missing), for the
     teacher."""
     seen, _ = load_scenes(config.data, config.resolution, config.max_depth, config.cache, TEACHER_SIX_VIEWS,
-                          config.workers, config.progress)  # fmt: skip
+                          config.workers, config.progress, config.sources)  # fmt: skip
     by_key = {scene.key: scene.source for scene in seen}
     return [by_key[scene.key] for scene in scenes]
 
@@ -457,6 +463,8 @@ def _identity(config: TrainConfig, val_scenes: list[Scene]) -> dict[str, Any]:
     }
     if config.max_train_scenes is not None:  # absent otherwise, so earlier checkpoints still resume
         identity["max_train_scenes"] = config.max_train_scenes
+    if config.sources is not None:  # the same
+        identity["sources"] = sorted(config.sources)
     if config.teacher is not None:
         identity["teacher"] = weights_id(Path(config.teacher))
     if config.teacher_views != "original":  # absent otherwise, so earlier checkpoints still resume
@@ -546,6 +554,7 @@ def _training_settings(
         "patience": config.patience,
         "val_fraction": config.val_fraction,
         "max_train_scenes": config.max_train_scenes,
+        "sources": None if config.sources is None else sorted(config.sources),
         "seed": config.seed,
         "augment": {
             "height": "z turns k*90 deg; random height: z shift uniform over all shifts keeping the labels in the grid",

@@ -4,6 +4,7 @@ The raw dataset layout it writes is tested in ``tests/vgn_data/test_raw_dataset.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -150,3 +151,69 @@ def test_a_session_the_service_forgot_is_reopened(server):
             assert vgn.session(labeller.session_id).frame_count == len(labelled[0].depth)
         finally:
             labeller.close()
+
+
+def test_answer_labels_are_the_services_plain_answers_tried_as_answered(server):
+    """``answer_grasps``: after the point labels come rows for the service's own plain answers, each at
+    the pose answered, with the label a replay of that pose gives; another model's answers are refused."""
+    from client.http import VGNClient
+    from sim_worker.datagen import SceneLabeller
+    from sim_worker.grasping import execute_grasp
+
+    with VGNClient(server.url) as vgn:
+        model = vgn.model().model_id
+        config = DataGenConfig(scene="pile", objects=("blocks",), points_per_scene=3, answer_grasps=5,
+                               answer_threshold=0.0, answer_model=model, renderer="tiny")  # fmt: skip
+        labeller = SceneLabeller(vgn, config)
+        try:
+            index, labelled = next(
+                (i, found) for i in range(6) if (found := labeller.label_scene(i)) is not None
+            )
+            rows = labelled[1]
+            answers = rows[3:]
+            assert 1 <= len(answers) <= 5, "some of the random network's many answers, at most answer_grasps"
+            answered = vgn.grasps(labeller.session_id, threshold=0.0, turn_average=False, clearance=False,
+                                  grip=False).grasps  # fmt: skip
+            poses = np.array([g.as_matrix() for g in answered])
+            labeller.builder.build(index)  # the scene as it stood before its trials
+            state = labeller.world.save_state()
+            for row in answers:
+                pose = np.eye(4)
+                pose[:3, :3] = Rotation.from_quat(row[:4]).as_matrix()
+                pose[:3, 3] = row[4:7]
+                match = np.abs(poses - pose).max(axis=(1, 2)).min()
+                assert match < 1e-5, "each answer row is an answered pose, orientation included"
+                labeller.world.restore_state(state)
+                trial = execute_grasp(labeller.world, labeller.gripper, pose, allow_contact=False,
+                                      remove_grasped=False, fast=True)  # fmt: skip
+                assert trial.label == row[8]
+        finally:
+            labeller.close()
+        other = SceneLabeller(vgn, dataclasses.replace(config, answer_model="0" * 12))
+        try:
+            with pytest.raises(RuntimeError, match="answers with model"):
+                for index in range(6):
+                    other.label_scene(index)
+        finally:
+            other.close()
+
+
+def test_answer_runs_record_the_answering_model_and_resume_only_with_it(server, tmp_path: Path):
+    out = tmp_path / "data"
+    command = [sys.executable, "-m", "client.cli", "generate-data", "--sim", "--url", server.url, "--scene", "pile",
+               "--objects", "blocks", "--points", "4", "--answer-grasps", "3", "--answer-threshold", "0",
+               "--renderer", "tiny", "--out", str(out)]  # fmt: skip
+    first = subprocess.run([*command, "--scenes", "1"], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    generation = json.loads((out / "generation.json").read_text())
+    from client.http import VGNClient
+
+    with VGNClient(server.url) as vgn:
+        assert generation["answer_model"] == vgn.model().model_id
+    assert (generation["answer_grasps"], generation["answer_threshold"]) == (3, 0.0)
+    generation["answer_model"] = "0" * 12
+    (out / "generation.json").write_text(json.dumps(generation))
+    refused = subprocess.run([*command, "--scenes", "2"], capture_output=True, text=True, timeout=300)
+    assert refused.returncode == 2 and "other settings (answer_model)" in refused.stderr
+    plain = DataGenConfig().recorded()
+    assert not any(key.startswith("answer") for key in plain), "folders made without answers still resume"

@@ -277,3 +277,32 @@ def test_teacher_and_student_see_the_six_views_and_the_card_says_so(raw: Path, t
     not_recipes = run("-m", "training.cli", "--data", str(legacy), "--teacher", str(PACKAGED_MODEL), "--teacher-views",
                       "six", "--epochs", "1", "--no-progress", "--out", str(tmp_path / "y.safetensors"))  # fmt: skip
     assert not_recipes.returncode != 0 and "needs recipe folders" in not_recipes.stderr
+
+
+def test_training_takes_the_sources_it_is_given(server, raw: Path, tmp_path: Path):
+    """``--source`` trains on some streams of a recipe folder: only their scenes are rendered and
+    drawn, the card says which, and a name the folder lacks is refused with the names it has."""
+    data = tmp_path / "data"
+    other = tmp_path / "raw-other"
+    generate(server.url, other, scenes=2, seed=8)
+    for folder, source in ((raw, "pile"), (other, "pile-other")):
+        assert vgn_data("pack", str(folder), "--source", source, "--out", str(data)).returncode == 0
+    cache = tmp_path / "cache"
+    scenes, (summary,) = load_scenes([data], 40, 2.0, cache, sources=("pile-other",))
+    assert {s.scene_id for s in scenes} == set(RawDataset(other).scene_ids()) and summary.scenes == len(
+        scenes
+    )
+    assert len(list(cache.rglob("*.npy"))) == 1, "only the chosen source's shard is rendered"
+    everything, _ = load_scenes([data], 40, 2.0, cache)
+    assert len(everything) > len(scenes)
+    with pytest.raises(ValueError, match="has the source\\(s\\) packed; it has: pile, pile-other"):
+        load_scenes([data], 40, 2.0, cache, sources=("packed",))
+    out = tmp_path / "w.safetensors"
+    trained = run("-m", "training.cli", "--data", str(data), "--cache", str(cache), "--source", "pile-other",
+                  "--epochs", "1", "--val-fraction", "0", "--out", str(out), "--no-progress")  # fmt: skip
+    assert trained.returncode == 0, trained.stderr
+    card = json.loads(out.with_suffix(".card.json").read_text())
+    assert card["training"]["sources"] == ["pile-other"] and card["datasets"][0]["scenes"] == len(scenes)
+    refused = run("-m", "training.cli", "--data", str(data), "--cache", str(cache), "--source", "packed",
+                  "--epochs", "1", "--out", str(tmp_path / "x.safetensors"), "--no-progress")  # fmt: skip
+    assert refused.returncode != 0 and "it has: pile, pile-other" in refused.stderr
