@@ -109,6 +109,11 @@ def merged_object_set(names: tuple[str, ...], scene: str) -> ObjectSet:
     return ObjectSet("+".join(s.name for s in sets), urdfs, 1.0, scales)
 
 
+def in_valid_region(points: np.ndarray) -> np.ndarray:
+    """(M,) bool: which of the (M, 3) world points lie where grasps are labelled."""
+    return np.all((points >= VALID_LOWER) & (points <= VALID_UPPER), axis=1)
+
+
 def scene_id(seed: int, index: int) -> str:
     """Deterministic ids, so a resumed run knows which scenes are done."""
     return f"s{seed}-{index:07d}"
@@ -229,8 +234,7 @@ class SceneLabeller:
         if not np.any(self.vgn.tsdf(self.session_id) > 0.5):
             return None  # the fused grid holds no observed surface: nothing to label
         cloud = self.vgn.cloud(self.session_id)
-        inside = np.all((cloud[:, :3] >= VALID_LOWER) & (cloud[:, :3] <= VALID_UPPER), axis=1)
-        candidates = cloud[inside & (cloud[:, 5] > MIN_NORMAL_Z)]
+        candidates = cloud[in_valid_region(cloud[:, :3]) & (cloud[:, 5] > MIN_NORMAL_Z)]
         if not len(candidates):
             return None
         rng = built.rng
@@ -263,8 +267,8 @@ class SceneLabeller:
         if self.config.answer_model is not None and answer.model != self.config.answer_model:
             raise RuntimeError(f"the service answers with model {answer.model}, but this run labels the "
                                f"answers of {self.config.answer_model}; restart it with those weights")  # fmt: skip
-        inside = [g for g in answer.grasps
-                  if np.all((np.asarray(g.position) >= VALID_LOWER) & (np.asarray(g.position) <= VALID_UPPER))]  # fmt: skip
+        positions = np.array([g.position for g in answer.grasps]).reshape(-1, 3)
+        inside = [g for g, ok in zip(answer.grasps, in_valid_region(positions), strict=True) if ok]
         count = min(self.config.answer_grasps, len(inside))
         rows = []
         for i in rng.permutation(len(inside))[:count]:

@@ -57,8 +57,7 @@ def run(args: argparse.Namespace) -> int:
         config = DataGenConfig(scene=args.scene, objects=tuple(args.objects or ()), seed=args.seed,
                                points_per_scene=args.points, noise=args.noise,
                                noise_fraction=args.noise_fraction, side_view_fraction=args.side_view_fraction,
-                               answer_grasps=getattr(args, "answer_grasps", 0),
-                               answer_threshold=getattr(args, "answer_threshold", 0.5),
+                               answer_grasps=args.answer_grasps, answer_threshold=args.answer_threshold,
                                renderer=args.renderer)  # fmt: skip
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
@@ -78,18 +77,17 @@ def run(args: argparse.Namespace) -> int:
     done = dataset.done_scene_ids()
     indices = range(first, first + args.scenes)
     todo = [i for i in indices if scene_id(args.seed, i) not in done]
-    ray = getattr(args, "ray", None) is not None
-    if ray and config.answer_grasps and args.url is None:
-        print("error: --answer-grasps with --ray needs --url: one service whose model's answers are labelled",
-              file=sys.stderr)  # fmt: skip
-        return 2
-    if ray and config.answer_grasps:
-        config, failed = _with_answer_model(args.url, args.api_key, out, config)
-        if failed:
-            return failed
-    if ray:  # the scenes spread over a Ray cluster instead
+    if getattr(args, "ray", None) is not None:  # the scenes spread over a Ray cluster instead
         from sim_worker.ray_runner import generate_on_ray
 
+        if config.answer_grasps:
+            if args.url is None:
+                print("error: --answer-grasps with --ray needs --url: one service whose model's answers are "
+                      "labelled", file=sys.stderr)  # fmt: skip
+                return 2
+            config, failed = _with_answer_model(args.url, args.api_key, out, config)
+            if failed:
+                return failed
         return generate_on_ray(args, config, dataset, todo)
     args.workers = args.workers or 1
     print(f"{args.scenes - len(todo)} of {args.scenes} scenes already in {out}; labelling {len(todo)} "

@@ -51,9 +51,11 @@ def test_answers_are_scored_by_each_model_and_the_checks(server, random_checkpoi
             both = 0 < rows[:, 8].sum() < len(rows)
             assert (0.0 <= got["auc"] <= 1.0) if both else got["auc"] is None
             assert set(got["top_success"]) == {"20%", "40%", "60%", "80%"}
-    # The random network answered everything it was asked at threshold 0, so each answer's own
-    # plain quality is at least 0: every answer counts at threshold 0.5 or not, none is lost.
-    assert first["plain"]["at_threshold"]["0.5"]["count"] <= len(rows)
+    for by_score in result["models"].values():  # the checks gate a quality: they only ever drop answers
+        for quality in ("plain", "turned"):
+            gated = by_score[f"{quality}_checked"]["at_threshold"]["0.5"]["count"]
+            assert gated <= by_score[quality]["at_threshold"]["0.5"]["count"]
+        assert "at_threshold" not in by_score["checks"], "pass or fail is no quality"
     assert (
         f"in {len(set(np.loadtxt(raw / 'grasps.csv', delimiter=',', skiprows=1, usecols=0, dtype=str)))} scenes of answers"
         in scored.stdout
