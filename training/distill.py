@@ -29,8 +29,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 import zipfile
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Iterable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
@@ -86,21 +89,48 @@ CHECKED_QUALITY = 0.5
 def soft_targets(teacher: GraspPlanner, grid: np.ndarray, voxel_size: float | None = None) -> SoftTargets:
     """The teacher's turn-averaged answer for one (N, N, N) grid at its grasp-region voxels;
     with ``voxel_size`` (m) quality is 0 where the clearance or grip check fails."""
+    answer = turned_answer(teacher, grid)
+    if voxel_size is not None:
+        answer = answer.checked(failing_checks(grid, voxel_size, *answer.checked_inputs()))
+    return answer.compact()
+
+
+@dataclass(frozen=True)
+class TurnedAnswer:
+    """The teacher's turn-averaged answer at a grid's grasp-region voxels in full precision, as
+    the checks read it, before it is made compact."""
+
+    voxel: np.ndarray
+    quality: np.ndarray
+    quaternion: np.ndarray
+    width: np.ndarray
+
+    def checked_inputs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What :func:`failing_checks` reads after the grid and voxel size."""
+        return self.voxel, self.quaternion, self.quality
+
+    def checked(self, failing: np.ndarray) -> TurnedAnswer:
+        """The answer with quality 0 where ``failing``."""
+        return TurnedAnswer(self.voxel, np.where(failing, 0.0, self.quality), self.quaternion, self.width)
+
+    def compact(self) -> SoftTargets:
+        """The answer as stored for training: uint8 voxels, float16 values."""
+        return SoftTargets(
+            voxel=self.voxel.astype(np.uint8),
+            quality=self.quality.astype(np.float16),
+            quaternion=self.quaternion.astype(np.float16),
+            width=self.width.astype(np.float16),
+        )
+
+
+def turned_answer(teacher: GraspPlanner, grid: np.ndarray) -> TurnedAnswer:
+    """The teacher's turn-averaged quality, orientation and width at ``grid``'s grasp region."""
     output = teacher.infer(grid, turn_average=True)
     region = grasp_region(grid)
     voxel = np.argwhere(region)
     index = tuple(voxel.T)
     rotation = output.rotation_where(region)
-    quaternion = rotation[(slice(None), *index)].T
-    quality = output.quality[index]
-    if voxel_size is not None:
-        quality = np.where(failing_checks(grid, voxel_size, voxel, quaternion, quality), 0.0, quality)
-    return SoftTargets(
-        voxel=voxel.astype(np.uint8),
-        quality=quality.astype(np.float16),
-        quaternion=quaternion.astype(np.float16),
-        width=output.width[index].astype(np.float16),
-    )
+    return TurnedAnswer(voxel, output.quality[index], rotation[(slice(None), *index)].T, output.width[index])
 
 
 def failing_checks(
@@ -127,10 +157,13 @@ def teach(
     device: str,
     progress: bool = True,
     voxel_sizes: Sequence[float] | None = None,
+    workers: int = 0,
 ) -> list[SoftTargets]:
     """Soft targets of every scene from the weights at ``weights``, run as the service runs them
     (the fast form, in float32); ``grids`` are sources with ``load() -> (N, N, N) array``. With
-    ``voxel_sizes`` (one per grid) the targets carry the clearance and grip checks."""
+    ``voxel_sizes`` (one per grid) the targets carry the clearance and grip checks; with
+    ``workers`` >= 2 the checks, ten times the network's cost on a CPU, run in that many
+    processes while the network answers the next scenes."""
     teacher = GraspPlanner.from_path(
         weights, device, InferenceOptions(precision="float32", batch_window_ms=0.0)
     )
@@ -138,7 +171,30 @@ def teach(
     sizes = [None] * len(grids) if voxel_sizes is None else list(voxel_sizes)
     if len(sizes) != len(grids):
         raise ValueError(f"{len(grids)} grids but {len(sizes)} voxel sizes")
-    return [soft_targets(teacher, source.load(), size) for source, size in zip(bar, sizes, strict=True)]
+    if voxel_sizes is None or workers < 2:
+        return [soft_targets(teacher, source.load(), size) for source, size in zip(bar, sizes, strict=True)]
+    return _teach_checked_in_parallel(teacher, bar, sizes, workers)
+
+
+def _teach_checked_in_parallel(
+    teacher: GraspPlanner, grids: Iterable[object], sizes: list[float], workers: int
+) -> list[SoftTargets]:
+    """:func:`soft_targets` with checks for every grid, the checks in ``workers`` processes (spawned:
+    the teacher may hold a GPU, which a forked process must not touch). At most a few scenes per
+    process wait at a time, so the grids in flight stay few."""
+    targets: list[SoftTargets] = []
+    pending: deque[tuple[TurnedAnswer, Future[np.ndarray]]] = deque()
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=context) as pool:
+        for source, size in zip(grids, sizes, strict=True):
+            grid = source.load()
+            answer = turned_answer(teacher, grid)
+            pending.append((answer, pool.submit(failing_checks, grid, size, *answer.checked_inputs())))
+            while len(pending) > 4 * workers or (pending and pending[0][1].done()):
+                answer, failing = pending.popleft()
+                targets.append(answer.checked(failing.result()).compact())
+        targets.extend(answer.checked(failing.result()).compact() for answer, failing in pending)
+    return targets
 
 
 #: Bump when what a teacher's soft targets mean changes (the turn averaging, the checks, the

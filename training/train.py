@@ -394,7 +394,7 @@ def _teacher_targets(
     soft = load_targets(saved, key)
     if soft is None:
         try:
-            soft = teach(Path(config.teacher), sources, str(device), config.progress, sizes)
+            soft = teach(Path(config.teacher), sources, str(device), config.progress, sizes, config.workers)
         except CheckpointError as error:
             raise TrainingError(f"--teacher: {error}") from None
         save_targets(saved, key, soft)

@@ -142,6 +142,23 @@ def test_checked_soft_labels_are_zero_exactly_where_the_services_checks_drop_the
     assert 0 < service_drops.sum() < len(rows)
 
 
+def test_checks_in_worker_processes_give_the_same_targets_as_in_this_one():
+    """The checks run in spawned processes while the network answers the next scenes; the
+    targets, in scene order, are those of the serial run, bit for bit."""
+    grids = [PackedGrid(quantize(grid)) for _, grid in recorded_grids()[:5]]
+    sizes = [VOXEL] * len(grids)
+    serial = teach(PACKAGED_MODEL, grids, "cpu", progress=False, voxel_sizes=sizes)
+    parallel = teach(PACKAGED_MODEL, grids, "cpu", progress=False, voxel_sizes=sizes, workers=2)
+    assert len(parallel) == len(serial) == len(grids)
+    for one, other in zip(parallel, serial, strict=True):
+        for name in ("voxel", "quality", "quaternion", "width"):
+            assert np.array_equal(getattr(one, name), getattr(other, name))
+    unchecked = teach(PACKAGED_MODEL, grids, "cpu", progress=False)
+    assert any(not np.array_equal(c.quality, u.quality) for c, u in zip(serial, unchecked, strict=True)), (
+        "the checks zeroed some of the teacher's grasps"
+    )
+
+
 def one_voxel_targets(voxel, quaternion, quality=0.7, width=4.0) -> SoftTargets:
     return SoftTargets(
         voxel=np.asarray([voxel], np.uint8),
