@@ -26,7 +26,8 @@ Inputs:
 
 Outputs in ``docs/generated/`` (included into the pages by ``pymdownx.snippets``): ``clutter.md``,
 ``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
-``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
+``operating-curves.md`` (clutter results of one model and request at several thresholds; drawn by
+``python -m benchmarks.operating_curve``), ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
 results exist, the block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` in
 README.md is rewritten with the headline table too (without dates: the benchmark page carries them).
 """
@@ -40,6 +41,7 @@ import os
 import platform
 import sys
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -250,14 +252,22 @@ def shipped_model_id() -> str | None:
         return None
 
 
+def shipped_threshold() -> float | None:
+    """The packaged model's operating threshold (its card's): what a request that names none uses."""
+    try:
+        return float(json.loads(CARD.read_text())["threshold"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def headline_table(results: Path) -> str | None:
     """The README's table: success / cleared per scenario (rows) and planner (columns), from the
     newest run of each, random selection (the paper's), next to the paper's VGN; only runs of the
-    packaged weights (and the weight-free baseline) on the shipped code (no ``variant.md``); None
-    without results."""
+    packaged weights at their operating threshold (and the weight-free baseline) on the shipped code
+    (no ``variant.md``); None without results."""
     cells: dict[tuple[str, str], tuple[str, str]] = {}  # (scenario, planner) -> (measured at, text)
     planners: list[str] = []
-    shipped = shipped_model_id()
+    shipped, threshold = shipped_model_id(), shipped_threshold()
     for folder, rows in clutter_runs(results):
         if variant(folder):
             continue  # a control or an experiment on changed code: not what the package does
@@ -266,6 +276,12 @@ def headline_table(results: Path) -> str | None:
                 continue
             if row.get("model") not in (shipped, "antipodal"):
                 continue  # other weights (experiments) have their own pages
+            if (
+                row.get("model") == shipped
+                and None not in (threshold, row.get("threshold"))
+                and row["threshold"] != threshold
+            ):
+                continue  # another threshold is another operating point (operating-curves.md)
             scenario = scenario_label(folder, row)
             when = measured_at(row_measured(row, folder))
             text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f}"
@@ -759,6 +775,79 @@ def paired_comparison(results: Path) -> list[str]:
     return lines
 
 
+# Operating curves ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CurvePoint:
+    """One benchmark row on a curve: its threshold, the row (success and cleared % with intervals) and its folder."""
+
+    threshold: float
+    row: dict[str, Any]
+    folder: Path
+
+    @property
+    def when(self) -> str:
+        """When the row was measured, sortable (newest wins at a threshold)."""
+        return measured_at(row_measured(self.row, self.folder))
+
+
+#: (model, request as the benchmark names it, scenario with how it was seen)
+CurveKey = tuple[str, str, str]
+
+
+def operating_curves(results: Path) -> dict[CurveKey, list[CurvePoint]]:
+    """Every curve with two or more thresholds under ``results``, its points by threshold."""
+    newest: dict[CurveKey, dict[float, CurvePoint]] = {}
+    for folder, rows in clutter_runs(results):
+        if variant(folder):
+            continue
+        for row in rows:
+            if row.get("selection", "random") != "random" or row.get("success_rate") is None:
+                continue
+            if row.get("threshold") is None or not row.get("model"):
+                continue
+            key = (str(row["model"]), str(row["planner"]), scenario_label(folder, row))
+            point = CurvePoint(float(row["threshold"]), row, folder)
+            known = newest.setdefault(key, {}).get(point.threshold)
+            if known is None or point.when >= known.when:
+                newest[key][point.threshold] = point
+    return {
+        key: [points[threshold] for threshold in sorted(points)]
+        for key, points in sorted(newest.items())
+        if len(points) >= 2
+    }
+
+
+def curves_page(results: Path) -> str:
+    """The curves as Markdown tables, one per (model, request, scenario)."""
+    curves = operating_curves(results)
+    if not curves:
+        return (
+            "No model and request has been benchmarked at two thresholds yet: run `benchmarks.clutter` "
+            "with several `--threshold` values, copy the `--out` folders to `docs/results/` and run "
+            "`python -m benchmarks.report`.\n"
+        )
+    parts = []
+    for (model, request, scenario), points in curves.items():
+        parts.append(f"#### `{model}`, `{request}`, {scenario}\n")
+        parts.append(
+            "| threshold | success % (95 % CI) | cleared % (95 % CI) | attempts "
+            "| failures: approach contact / nothing held / slipped / collision | result folder | measured on |"
+        )
+        parts.append("| ---: | --- | --- | ---: | --- | --- | --- |")
+        for point in points:
+            row, outcomes = point.row, point.row.get("outcomes") or {}
+            parts.append(
+                f"| {point.threshold:g} | {pct(row['success_rate'], row.get('success_rate_ci95'))} | "
+                f"{pct(row.get('percent_cleared'), row.get('percent_cleared_ci95'))} | "
+                f"{row.get('attempts', '-')} | "
+                f"{' / '.join(str(outcomes.get(key, 0)) for key, _ in FAILURES)} | "
+                f"`{relative(point.folder, results)}` | "
+                f"{cell(machine_text(row_measured(row, point.folder)))} |"
+            )
+        parts.append("")
+    return "\n".join(parts)
+
+
 # Main -----------------------------------------------------------------------------------------
 def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
     """Generated file name -> (its source, for the header; the function that makes its text)."""
@@ -767,6 +856,7 @@ def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
         "latency.md": ("docs/results/**/latency.json", lambda: latency_page(results)),
         "device-planning.md": ("docs/results/**/device_planning.json", lambda: device_planning_page(results)),
         "fleet.md": ("docs/results/**/fleet.json", lambda: fleet_page(results)),
+        "operating-curves.md": ("docs/results/**/table.json", lambda: curves_page(results)),
         "training-data.md": (
             "data/manifest.json, docs/results/**/recipe-training.json",
             lambda: training_data_page(json.loads(DATA_MANIFEST.read_text()), results),

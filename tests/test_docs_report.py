@@ -123,7 +123,8 @@ def test_the_command_writes_then_checks(tmp_path: Path, monkeypatch):
     assert report.main([*argv, "--check"]) == 1, "nothing generated yet"
     assert report.main(argv) == 0
     assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md", "http-endpoints.md",
-                                               "model-card.md", "training-data.md", "fleet.md", "device-planning.md"}  # fmt: skip
+                                               "model-card.md", "training-data.md", "fleet.md", "device-planning.md",
+                                               "operating-curves.md"}  # fmt: skip
     assert "| `vgn+turns+clearance` |" in readme.read_text()
     assert "`VGN_TURN_AVERAGE`" in (out / "configuration.md").read_text()
     assert "### `GET /sessions/{session_id}/grasps`" in (out / "http-endpoints.md").read_text()
@@ -226,3 +227,14 @@ def test_of_two_runs_on_one_day_the_readme_shows_the_later(tmp_path: Path, monke
     assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in lines
     assert report.measured_at({"date": day}) < report.measured_at({"date": day, "time": "00:00:00"})
     assert report.measured_at(None) == ""
+
+
+def test_the_readme_table_keeps_the_operating_threshold(tmp_path: Path, monkeypatch):
+    """A run of the packaged weights at another threshold is another operating point: newer or
+    not, it stays out of the README's table (the operating curves table it)."""
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    monkeypatch.setattr(report, "shipped_threshold", lambda: 0.8)
+    later = {**ROW["measured"], "time": "23:00:00"}
+    clutter_results(tmp_path / "a", [ROW])
+    clutter_results(tmp_path / "b", [{**ROW, "threshold": 0.9, "success_rate": 75.6, "measured": later}])
+    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
