@@ -161,6 +161,11 @@ def clutter_runs(results: Path) -> list[tuple[Path, list[dict[str, Any]]]]:
     return runs
 
 
+def failures_cell(outcomes: dict[str, int]) -> str:
+    """A row's failures in :data:`FAILURES` order, ``72 / 7 / 90 / 0``."""
+    return " / ".join(str(outcomes.get(key, 0)) for key, _ in FAILURES)
+
+
 def clutter_table(folder: Path, rows: list[dict[str, Any]]) -> list[str]:
     """One results folder as a Markdown table, each row with the date and machine it ran on."""
     lines = [
@@ -178,7 +183,7 @@ def clutter_table(folder: Path, rows: list[dict[str, Any]]) -> list[str]:
             f"{row.get('threshold', '-')} | {row.get('rounds', '-')} | "
             f"{pct(row.get('success_rate'), row.get('success_rate_ci95'))} | "
             f"{pct(row.get('percent_cleared'), row.get('percent_cleared_ci95'))} | "
-            f"{' / '.join(str(outcomes.get(key, 0)) for key, _ in FAILURES)} | "
+            f"{failures_cell(outcomes)} | "
             f"{'-' if planning is None else f'{planning:.0f}'} | "
             f"{f'{paper[0]} / {paper[1]}' if paper else '-'} | {cell(machine_text(row_measured(row, folder)))} |"
         )  # fmt: skip
@@ -840,7 +845,7 @@ def curves_page(results: Path) -> str:
                 f"| {point.threshold:g} | {pct(row['success_rate'], row.get('success_rate_ci95'))} | "
                 f"{pct(row.get('percent_cleared'), row.get('percent_cleared_ci95'))} | "
                 f"{row.get('attempts', '-')} | "
-                f"{' / '.join(str(outcomes.get(key, 0)) for key, _ in FAILURES)} | "
+                f"{failures_cell(outcomes)} | "
                 f"`{relative(point.folder, results)}` | "
                 f"{cell(machine_text(row_measured(row, point.folder)))} |"
             )
