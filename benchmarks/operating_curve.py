@@ -10,8 +10,8 @@ folders (``table.json``, ``python -m benchmarks.clutter --threshold T --out FOLD
 (model, request, scenario and sensing) measured at two or more thresholds, random selection, the
 newest run at each threshold; folders of changed code (``variant.md``) are left out.
 ``python -m benchmarks.report`` tables the curves (docs/generated/operating-curves.md, from
-``report.operating_curves``); this command draws one scenario's curves, with 95 % intervals on both axes and the dates and machines
-they were measured on in the title.
+``report.operating_curves``); this command draws one scenario's curves, with 95 % intervals on
+both axes and the dates and machines they were measured on in the title.
 """
 
 from __future__ import annotations
