@@ -34,8 +34,7 @@ def draw(curves: dict[report.CurveKey, list[report.CurvePoint]], scenario: str, 
     if not chosen:
         raise ValueError(f"no curve of {scenario!r} (curves: {sorted({key[2] for key in curves})})")
     figure, axes = plt.subplots(figsize=(7.0, 5.0))
-    machines: set[str] = set()
-    dates: set[str] = set()
+    measured_on: set[str] = set()
     for (model, request, _), points in chosen.items():
         cleared = [p.row["percent_cleared"] for p in points]
         success = [p.row["success_rate"] for p in points]
@@ -48,16 +47,12 @@ def draw(curves: dict[report.CurveKey, list[report.CurvePoint]], scenario: str, 
             axes.annotate(
                 f"{point.threshold:g}", (x, y), textcoords="offset points", xytext=(5, 5), fontsize=8
             )
-            measured = report.row_measured(point.row, point.folder) or {}
-            dates.add(str(measured.get("date", "date not recorded")))
-            machines.add(
-                f"{measured.get('cpu', 'machine not recorded')} ({measured.get('cores', '?')} cores)"
-            )
+            measured_on.add(report.machine_text(report.row_measured(point.row, point.folder)))
     axes.set_xlabel("objects cleared %")
     axes.set_ylabel("grasp success %")
     axes.set_title(
         f"{scenario}: success against objects cleared by quality threshold\n"
-        f"measured {', '.join(sorted(dates))} on {', '.join(sorted(machines))}",
+        f"measured {'; '.join(sorted(measured_on))}",
         fontsize=9,
     )
     axes.grid(alpha=0.3)

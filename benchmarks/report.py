@@ -283,8 +283,8 @@ def headline_table(results: Path) -> str | None:
                 continue  # other weights (experiments) have their own pages
             if (
                 row.get("model") == shipped
-                and None not in (threshold, row.get("threshold"))
-                and row["threshold"] != threshold
+                and threshold is not None
+                and row.get("threshold", threshold) != threshold
             ):
                 continue  # another threshold is another operating point (operating-curves.md)
             scenario = scenario_label(folder, row)

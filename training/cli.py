@@ -316,7 +316,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="W",
         type=int,
         default=DEFAULTS["workers"],
-        help="processes fusing grids, loading batches and running the teacher's checks (default %(default)s = in this process)",
+        help="processes fusing grids, loading batches and running the teacher's checks "
+        "(default %(default)s = in this process)",
     )
     machine.add_argument(
         "--threads",
