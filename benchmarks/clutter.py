@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 from benchmarks.chart import write_chart
 from benchmarks.paper import PAPER_GPD, PAPER_TABLE_1, SCENARIOS
-from benchmarks.report import this_machine
+from benchmarks.report import no_grasp_cell, this_machine
 from client.embedded import EmbeddedService
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES
@@ -279,7 +279,22 @@ def format_row(row: dict) -> str:
         return f"{row[key]:5.1f} ({low:.1f}-{high:.1f})" if row[key] is not None else "    -"
 
     planning = row["planning_ms"]["p50"] if row.get("planning_ms") else float("nan")
-    return f"{row['rounds']:4d} rounds  success {pct('success_rate')}  cleared {pct('percent_cleared')}  planning p50 {planning:.0f} ms"
+    return (
+        f"{row['rounds']:4d} rounds  success {pct('success_rate')}  cleared {pct('percent_cleared')}  "
+        f"no grasp offered {no_grasp_cell(row)} % of rounds  planning p50 {planning:.0f} ms"
+    )
+
+
+def objects_text(args: argparse.Namespace) -> str:
+    """Which objects the pile and packed scenes drop, for the settings line: VGN-style folders by
+    name, else the pybullet_data set, a source no training scene draws from."""
+    folders = [Path(folder).name for folder in (args.pile_objects, args.packed_objects) if folder]
+    if len(folders) == 2:
+        return f"objects {folders[0]} (pile), {folders[1]} (packed)"
+    if not folders:
+        return "pybullet_data objects"
+    scene = "pile" if args.pile_objects else "packed"
+    return f"objects {folders[0]} ({scene}), pybullet_data objects otherwise"
 
 
 def failures_cell(row: dict) -> str:
@@ -294,11 +309,13 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
         f"{looking(args.views, args.scan)}{', depth noise' if args.noise else ''}"
         f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
-        f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}",
+        f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}"
+        f", {objects_text(args)}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
+        "| no grasp offered % of rounds "
         "| failures: approach contact / nothing held / slipped / collision | planning p50 ms | paper VGN ε=0.9 | paper GPD |",
-        "| --- | --- | ---: | --- | ---: | --- | --- | --- | ---: | --- | --- |",
+        "| --- | --- | ---: | --- | ---: | --- | --- | ---: | --- | ---: | --- | --- |",
     ]
     for row in rows:
         paper, gpd = PAPER_TABLE_1.get(row["scenario"]), PAPER_GPD.get(row["scenario"])
@@ -308,7 +325,7 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
             f"| {row['planner']} | {row['selection']} | {row['threshold']} | {row['scenario']} | {row['rounds']} | "
             f"{'-' if success is None else f'{success:.1f}'} ({row['success_rate_ci95'][0]:.1f}-{row['success_rate_ci95'][1]:.1f}) | "
             f"{'-' if cleared is None else f'{cleared:.1f}'} ({row['percent_cleared_ci95'][0]:.1f}-{row['percent_cleared_ci95'][1]:.1f}) | "
-            f"{failures_cell(row)} | "
+            f"{no_grasp_cell(row)} | {failures_cell(row)} | "
             f"{'-' if planning is None else f'{planning:.0f}'} | {f'{paper[0]} / {paper[1]}' if paper else '-'} | "
             f"{f'{gpd[0]} / {gpd[1]}' if gpd else '-'} |"
         )  # fmt: skip

@@ -166,13 +166,20 @@ def failures_cell(outcomes: dict[str, int]) -> str:
     return " / ".join(str(outcomes.get(key, 0)) for key, _ in FAILURES)
 
 
+def no_grasp_cell(row: dict[str, Any]) -> str:
+    """The share of rounds (%) that ended with no grasp offered while objects remained; ``-`` for
+    results from before round endings were recorded."""
+    share = row.get("no_grasp_rate")
+    return "-" if share is None else f"{share:.0f}"
+
+
 def clutter_table(folder: Path, rows: list[dict[str, Any]]) -> list[str]:
     """One results folder as a Markdown table, each row with the date and machine it ran on."""
     lines = [
         "| planner | selection | scenario | threshold | rounds | success % (95 % CI) | cleared % (95 % CI) "
-        "| failures: approach contact / nothing held / slipped / collision | planning p50 ms | paper VGN "
-        "| measured on |",
-        "| --- | --- | --- | ---: | ---: | --- | --- | --- | ---: | --- | --- |",
+        "| no grasp offered % of rounds | failures: approach contact / nothing held / slipped / collision "
+        "| planning p50 ms | paper VGN | measured on |",
+        "| --- | --- | --- | ---: | ---: | --- | --- | ---: | --- | ---: | --- | --- |",
     ]
     for row in rows:
         outcomes = row.get("outcomes") or {}
@@ -183,7 +190,7 @@ def clutter_table(folder: Path, rows: list[dict[str, Any]]) -> list[str]:
             f"{row.get('threshold', '-')} | {row.get('rounds', '-')} | "
             f"{pct(row.get('success_rate'), row.get('success_rate_ci95'))} | "
             f"{pct(row.get('percent_cleared'), row.get('percent_cleared_ci95'))} | "
-            f"{failures_cell(outcomes)} | "
+            f"{no_grasp_cell(row)} | {failures_cell(outcomes)} | "
             f"{'-' if planning is None else f'{planning:.0f}'} | "
             f"{f'{paper[0]} / {paper[1]}' if paper else '-'} | {cell(machine_text(row_measured(row, folder)))} |"
         )  # fmt: skip
@@ -231,7 +238,7 @@ def is_noisy(folder: Path, row: dict[str, Any]) -> bool:
 
 
 #: What a run's settings line says about how the scene was seen, and how tables name it.
-CONDITIONS = [("side view", "one side view"), ("depth noise", "depth noise"), ("dex sensor", "depth noise"),
+CONDITIONS = [("pybullet_data objects", "cross-source objects"), ("side view", "one side view"), ("depth noise", "depth noise"), ("dex sensor", "depth noise"),
               ("structured-light sensor", "structured-light sensor"), ("camera pose error", "camera pose error"),
               ("disturbances", "disturbed"), ("closed loop", "closed loop"), ("wrist scan", "wrist scan")]  # fmt: skip
 
@@ -289,7 +296,7 @@ def headline_table(results: Path) -> str | None:
                 continue  # another threshold is another operating point (operating-curves.md)
             scenario = scenario_label(folder, row)
             when = measured_at(row_measured(row, folder))
-            text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f}"
+            text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f} / {no_grasp_cell(row)}"
             if (scenario, row["planner"]) not in cells or when >= cells[scenario, row["planner"]][0]:
                 cells[scenario, row["planner"]] = (when, text)
             if row["planner"] not in planners:
@@ -311,7 +318,8 @@ def headline_table(results: Path) -> str | None:
         )
     lines.append("")
     lines.append(
-        "Success % / cleared %, random selection, from the result files in `docs/results/` "
+        "Success % / cleared % / rounds that ended with no grasp offered while objects remained % (`-`: "
+        "not recorded), random selection, from the result files in `docs/results/` "
         "(`python -m benchmarks.report`); intervals, settings, dates and machines: "
         "[Simulation and benchmark](docs/benchmark.md#results)."
     )

@@ -21,11 +21,11 @@ from client.schemas import (
     SessionInfo,
 )
 from service.baseline import plan_antipodal
-from service.clearance import clear_grasps
+from service.checks import check_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
-from service.grip import MIN_GRIP_FRAMES, GripConfig, gripping_grasps
+from service.grip import MIN_GRIP_FRAMES, GripConfig
 from service.planner import (
     NO_MODEL_MESSAGE,
     GraspPlanner,
@@ -218,6 +218,7 @@ class PlanningService:
             grid = (session.volume.grid() if baseline else observed) if grip else None
             surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
+            workspace_size = session.workspace.size
             frame_count, integration_ms = session.frame_count, session.integration_ms
             revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
@@ -237,14 +238,20 @@ class PlanningService:
                 self._keep_output(session_id, key, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
-        dropped = grip_dropped = None
-        if surface is not None:
-            clear = clear_grasps(grasps, surface)
-            grasps, dropped = clear, len(grasps) - len(clear)
-        if grid is not None:
-            gripping = gripping_grasps(grasps, grid, voxel_size, workspace_pose, self.grip_config)
-            grasps, grip_dropped = gripping, len(grasps) - len(gripping)
-        grasps = grasps[: query.max_grasps]
+        checked = check_grasps(grasps, surface, grid, voxel_size, workspace_pose, workspace_size,
+                               self.grip_config, self.settings.alternatives)  # fmt: skip
+        floor = self.settings.fallback_threshold
+        checks_ran = surface is not None or grid is not None
+        if (not baseline and checks_ran and not checked.grasps and query.threshold is None
+                and floor < threshold):  # fmt: skip
+            # Nothing passed at the operating threshold: rather than leave the robot with nothing to
+            # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
+            lower = ranked.model_copy(update={"threshold": floor})
+            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, lower)
+            checked = check_grasps(grasps, surface, grid, voxel_size, workspace_pose, workspace_size,
+                                   self.grip_config, self.settings.alternatives)  # fmt: skip
+            threshold = floor
+        grasps = checked.grasps[: query.max_grasps]
         return GraspResult(
             grasps=grasps,
             planning_ms=round((time.perf_counter() - started) * 1e3, 3),
@@ -252,8 +259,8 @@ class PlanningService:
             frame_count=frame_count,
             model=model,
             threshold=threshold,
-            clearance_dropped=dropped,
-            grip_dropped=grip_dropped,
+            clearance_dropped=checked.clearance_dropped,
+            grip_dropped=checked.grip_dropped,
             turn_average=turn_average,
         )
 
@@ -286,5 +293,6 @@ class PlanningService:
                 "turn_average": self.settings.turn_average,
                 "clearance": self.settings.clearance,
                 "grip": self.settings.grip,
+                "fallback_threshold": self.settings.fallback_threshold,
             },
         )

@@ -84,6 +84,21 @@ class Settings(BaseSettings):
         "both planners; fewer grasps slip out while lifting, at about 1 ms a request; a request may still "
         "ask for grip=false",
     )
+    alternatives: bool = Field(
+        default=True,
+        description="when a check drops a grasp, try it again turned about its approach and tilted "
+        "(service/checks.py) and keep the first pose that passes, so that a location the network is "
+        "confident about is not lost to its one orientation",
+    )
+    fallback_threshold: float = Field(
+        default=0.5,
+        ge=0.0,
+        le=1.0,
+        description="when a VGN request that names no threshold finds no grasp that passes the checks at "
+        "the model's operating threshold, answer with the grasps that pass them down to this quality "
+        "(the answer's threshold says which applied), so that a robot is not left with nothing to do while "
+        "objects remain; 1 answers with none",
+    )
     grip_preferred_alignment: float = Field(
         default=GripConfig().preferred_alignment,
         ge=-1.0,

@@ -32,10 +32,13 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     if config.planner == "vgn":
         threshold = model.threshold if config.threshold is None else config.threshold
         turns = service_default(config.turn_average, runtime, "turn_average")
+        checked = clearance or grip
+        floor = runtime.get("fallback_threshold") if config.threshold is None and checked else None
         return dataclasses.replace(
             config,
             model=model.model_id,
             threshold=threshold,
+            fallback_threshold=floor if floor is not None and floor < threshold else None,
             turn_average=turns,
             clearance=clearance,
             grip=grip,

@@ -67,6 +67,10 @@ class ClutterConfig:
     rounds: int = 1
     seed: int = 1
     threshold: float | None = None  # None: the service's default (the model's operating threshold)
+    # The quality the service falls back to when nothing passes the checks at its operating
+    # threshold (resolve_planner records it from the service when the run names no threshold; a run
+    # that names one asks for that one alone).
+    fallback_threshold: float | None = None
     views: Views = "six"
     selection: Selection = "best"
     planner: Planner = "vgn"  # antipodal: the service's geometric baseline
@@ -110,6 +114,7 @@ class ClutterConfig:
         check_at_least("object_count", self.object_count, 1)
         check_at_least("rounds", self.rounds, 1)
         check_fraction("threshold", self.threshold, optional=True)
+        check_fraction("fallback_threshold", self.fallback_threshold, optional=True)
         check_fraction("disturb", self.disturb)
         if self.scan == "wrist" and self.views != "six":
             raise ValueError("--scan wrist replaces the fixed views: leave --views at its default")
@@ -123,7 +128,8 @@ class ClutterConfig:
         first three first (``resolve_planner``): unresolved, the service's default is recorded as
         off whatever it is."""
         settings = asdict(self)
-        for switch in ("clearance", "grip", "turn_average", "sensor", "pose_error", "disturb", "closed_loop"):
+        for switch in ("clearance", "grip", "turn_average", "sensor", "pose_error", "disturb", "closed_loop",
+                       "fallback_threshold"):  # fmt: skip
             if not settings[switch]:
                 del settings[switch]
         if settings["scan"] == "fixed":
@@ -198,6 +204,7 @@ class ClutterRemoval:
         while self.world.objects and failures < MAX_CONSECUTIVE_FAILURES:
             observed = self.look(rng)
             if not observed.answer.grasps:
+                _record_empty_look(record, observed.answer)
                 break
             grasp = self._select(observed.answer.grasps, rng)
             if self.image_dir is not None:
@@ -218,6 +225,7 @@ class ClutterRemoval:
                 withdrawn_from = carried
                 aborts += 1
                 if aborts >= MAX_STOPS_IN_A_ROW:
+                    record.ended = "withdrawn"
                     break
             else:
                 aborts = 0
@@ -227,6 +235,10 @@ class ClutterRemoval:
             self.world.wait_for_rest()
             self.world.remove_objects_outside()
         record.cleared = record.successes
+        record.remaining = len(self.world.objects)
+        record.left = "+".join(sorted(self._body_name(body) for body in self.world.objects))
+        if not record.ended:
+            record.ended = "cleared" if not self.world.objects else "failures"
         record.seconds = round(time.perf_counter() - started, 3)
         if self.image_dir is not None:
             images.write_contact_sheet(self.image_dir, record)
@@ -285,7 +297,9 @@ class ClutterRemoval:
 
     def _query(self) -> dict:
         """The grasp request's options, as the run's settings give them."""
-        return {"threshold": self.config.threshold, "planner": self.config.planner,
+        # With a fallback the service's own threshold applies: a named one would switch the fallback off.
+        threshold = None if self.config.fallback_threshold is not None else self.config.threshold
+        return {"threshold": threshold, "planner": self.config.planner,
                 "clearance": self.config.clearance, "grip": self.config.grip,
                 "turn_average": self.config.turn_average}  # fmt: skip
 
@@ -341,6 +355,16 @@ class Observed:
     integration_ms: float
     first_grasp_ms: float
     client_ms: float | None
+
+
+def _record_empty_look(record: RoundRecord, answer: GraspResult) -> None:
+    """A look offered nothing: note it and what its planner found before the checks dropped it
+    (``last_candidates`` zero: the threshold or the valid region left nothing to check)."""
+    record.ended = "no_grasp"
+    clearance, grip = answer.clearance_dropped, answer.grip_dropped
+    record.last_candidates = (clearance or 0) + (grip or 0)
+    record.last_clearance_dropped = "" if clearance is None else clearance
+    record.last_grip_dropped = "" if grip is None else grip
 
 
 def _grasp_row(record: RoundRecord, grasp: Grasp, trial: GraspTrial, observed: Observed) -> dict:

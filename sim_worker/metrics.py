@@ -7,6 +7,8 @@ from collections.abc import Iterable, Mapping
 from statistics import mean, median
 from typing import Any
 
+from sim_worker.results import ROUND_ENDINGS
+
 Z_95 = 1.959964
 #: Failure classes shown in summaries, as (outcome value, short label); "collision" joins the
 #: pre-grasp and (labelling-only) approach collisions.
@@ -27,6 +29,25 @@ def outcome_counts(grasps: Iterable[Mapping[str, Any]]) -> dict[str, int]:
         key = "collision" if outcome.endswith("collision") else outcome
         if key in counts:
             counts[key] += 1
+    return counts
+
+
+def round_endings(rounds: Iterable[Mapping[str, Any]]) -> dict[str, int] | None:
+    """Rounds per ending (``ROUND_ENDINGS``) and, for the rounds whose last look offered nothing,
+    the stage that left it empty: ``threshold`` (no candidate reached the checks), ``clearance``
+    (the clearance check dropped every one) or ``grip`` (the grip check dropped the rest).
+    None for results from before endings were recorded."""
+    rounds = [row for row in rounds if row.get("ended")]
+    if not rounds:
+        return None
+    counts = {ending: 0 for ending in ROUND_ENDINGS} | {"threshold": 0, "clearance": 0, "grip": 0}
+    for row in rounds:
+        counts[row["ended"]] += 1
+        if row["ended"] != "no_grasp":
+            continue
+        candidates = int(row.get("last_candidates") or 0)
+        by_clearance = int(row.get("last_clearance_dropped") or 0)
+        counts["threshold" if candidates == 0 else "clearance" if by_clearance == candidates else "grip"] += 1
     return counts
 
 
@@ -55,6 +76,7 @@ def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) 
     integration = _floats(grasps, "integration_time")
     round_seconds = _floats(rounds, "seconds")
     attempted = [row for row in grasps if row.get("outcome") != "interrupted"]
+    endings = round_endings(rounds)
     disturbed = [row for row in attempted if row.get("disturbance")]
 
     def stats(values: list[float]) -> dict[str, float] | None:
@@ -71,6 +93,8 @@ def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) 
         "percent_cleared": round(100 * cleared / placed, 1) if placed else None,
         "percent_cleared_ci95": wilson_interval(cleared, placed),
         "outcomes": outcome_counts(grasps),
+        "endings": endings,
+        "no_grasp_rate": round(100 * endings["no_grasp"] / len(rounds), 1) if endings else None,
         "planning_ms": stats(planning),
         "client_planning_ms": stats(client_planning),
         "integration_ms": stats(integration),
@@ -89,6 +113,16 @@ def failure_breakdown(summary: Mapping[str, Any]) -> str:
     """``approach contact 3, nothing held 1, slipped 0, collision 0``."""
     outcomes = summary.get("outcomes") or {}
     return ", ".join(f"{label} {outcomes.get(key, 0)}" for key, label in FAILURE_CLASSES)
+
+
+def endings_breakdown(summary: Mapping[str, Any]) -> str:
+    """``cleared 3, two failures 5, no grasp offered 2 (threshold 1, clearance 0, grip 1)``."""
+    endings = summary.get("endings")
+    if not endings:
+        return "-"
+    text = f"cleared {endings['cleared']}, two failures {endings['failures']}, no grasp offered {endings['no_grasp']}"
+    text += f" (threshold {endings['threshold']}, clearance {endings['clearance']}, grip {endings['grip']})"
+    return text + (f", withdrawn {endings['withdrawn']}" if endings["withdrawn"] else "")
 
 
 def summary_table(summary: Mapping[str, Any]) -> str:
@@ -112,6 +146,7 @@ def summary_table(summary: Mapping[str, Any]) -> str:
             pct("percent_cleared") + f"  [{summary['objects_cleared']}/{summary['objects_placed']}]",
         ),
         ("failures", failure_breakdown(summary)),
+        ("rounds ended", endings_breakdown(summary)),
         ("planning (service)", ms("planning_ms")),
         ("planning (client)", ms("client_planning_ms")),
         ("integration / attempt", ms("integration_ms")),

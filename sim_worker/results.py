@@ -21,7 +21,26 @@ from typing import Any
 
 from vgn_data.files import check_settings, remove_stale_temporaries, write_atomically
 
-ROUND_COLUMNS = ["round_id", "scene_id", "object_count", "cleared", "attempts", "successes", "seconds"]
+ROUND_COLUMNS = [
+    "round_id",
+    "scene_id",
+    "object_count",
+    "cleared",
+    "attempts",
+    "successes",
+    "seconds",
+    # why the round ended (ROUND_ENDINGS), how many objects were left and which; when the last look
+    # offered nothing, what its planner found before the checks and what each check dropped
+    "ended",
+    "remaining",
+    "left",
+    "last_candidates",
+    "last_clearance_dropped",
+    "last_grip_dropped",
+]
+#: Why a round ends: the table is empty; two attempts in a row failed; a look offered no grasp
+#: while objects remained; the closed loop withdrew too often in a row.
+ROUND_ENDINGS = ("cleared", "failures", "no_grasp", "withdrawn")
 GRASP_COLUMNS = [
     "round_id",
     "scene_id",
@@ -73,6 +92,12 @@ class RoundRecord:
     attempts: int = 0
     successes: int = 0
     seconds: float = 0.0
+    ended: str = ""
+    remaining: int = 0
+    left: str = ""  # the remaining objects' file names, "+"-joined
+    last_candidates: int | str = ""
+    last_clearance_dropped: int | str = ""
+    last_grip_dropped: int | str = ""
     grasps: list[dict[str, Any]] = field(default_factory=list)
 
 

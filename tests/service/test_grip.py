@@ -159,7 +159,10 @@ def test_the_verdict_does_not_depend_on_the_workspace_frame():
 
 @pytest.fixture(scope="module")
 def trained() -> Iterator[PlanningService]:
-    service = PlanningService.from_settings(Settings(model=PACKAGED_MODEL, api_key=None, max_sessions=8))
+    """The packaged model with the checks alone: a dropped grasp is not tried again in other poses
+    (tests/service/test_checks.py covers those)."""
+    settings = Settings(model=PACKAGED_MODEL, api_key=None, max_sessions=8, alternatives=False)
+    service = PlanningService.from_settings(settings)
     yield service
     service.close()
 
@@ -209,7 +212,7 @@ def test_the_operator_sets_the_square_grip(trained):
     squarer = [g for g, square in zip(passing, kept, strict=True) if square]
     for preferred, expected in ((0.5, passing), (between, squarer)):
         core = PlanningService.from_settings(
-            Settings(model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred)
+            Settings(model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred, alternatives=False)
         )
         try:
             session = fused_session(core)

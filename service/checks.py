@@ -1,0 +1,178 @@
+"""The checks a planned grasp must pass, chained in one place, with alternatives for those they drop.
+
+The network answers one orientation per location. When the clearance check (the open hand would
+hit the observed surface) or the grip check (the fingers would not meet the surface squarely)
+drops it, the location itself is often graspable: turned about its approach the fingers meet two
+faces squarely, tilted a little the palm misses a neighbour. So each dropped grasp is tried again
+in the poses of :data:`ALTERNATIVES`, and the one that passes both checks and grips most squarely
+replaces it, keeping the
+network's quality for the location. Without this a look whose few confident locations all fail a
+check offers nothing, and the robot stops with objects on the table.
+
+Frames (docs/conventions.md): grasp frame +z approach, y closing axis, origin between the finger
+bases; tilts turn the hand about the middle of its pads so that the fingers stay on the object.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from client.schemas import Grasp
+from service.clearance import MAX_OPENING, approach_is_clear, fingers_inside
+from service.grip import GripConfig, GripMeasure, measure_grip
+
+#: Alternative hand poses tried for a dropped grasp, as (turn about the approach, tilt of the
+#: approach about the closing axis) in degrees and a step back along the approach in metres: turns
+#: (the fingers meet other faces at the same place), tilts (the hand comes in from beside an
+#: obstacle) and steps back (the fingertips stop short of the table under a flat object).
+ALTERNATIVES = (
+    (20, 0, 0.0), (-20, 0, 0.0), (45, 0, 0.0), (-45, 0, 0.0), (90, 0, 0.0),
+    (0, 20, 0.0), (0, -20, 0.0), (90, 20, 0.0), (90, -20, 0.0),
+    (0, 0, 0.01), (90, 0, 0.01), (0, 0, 0.02),
+)  # fmt: skip
+#: The hand turns about this point of the grasp frame (m): the middle of the pads.
+PIVOT = np.array([0.0, 0.0, 0.041])
+#: At most this many dropped grasps (the best ranked) are tried again: each costs
+#: ``len(ALTERNATIVES)`` more checked poses.
+MAX_RETRIED = 6
+
+
+@dataclass(frozen=True)
+class Checked:
+    """Grasps after the checks, in their ranked order, with what happened to the others:
+    ``clearance_dropped``/``grip_dropped`` count grasps each check dropped for good (None where it
+    did not run), ``replaced`` those that pass only in an alternative pose."""
+
+    grasps: list[Grasp]
+    clearance_dropped: int | None
+    grip_dropped: int | None
+    replaced: int
+
+
+def check_grasps(
+    grasps: list[Grasp],
+    surface: np.ndarray | None,
+    grid: np.ndarray | None,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+    workspace_size: float,
+    grip_config: GripConfig = GripConfig(),
+    alternatives: bool = True,
+) -> Checked:
+    """Run the clearance check on ``surface`` (world-frame points; None: not run) and the grip check
+    on ``grid`` (the network's input; None: not run) over ``grasps`` (world frame, best first),
+    trying :data:`ALTERNATIVES` for the dropped ones when ``alternatives``. The clearance check also
+    drops grasps whose open fingers reach outside the workspace cube (``workspace_size``, m)."""
+    if not grasps or (surface is None and grid is None):
+        return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0)
+    to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
+    positions = np.array([g.position for g in grasps], dtype=np.float64)
+    orientations = Rotation.from_quat([g.orientation for g in grasps])
+    clear, measure = _judge(positions, orientations, surface, grid, voxel_size, to_workspace, workspace_size)
+    passes = clear & _grip_passes(measure, len(grasps), grip_config)
+    chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
+    square = _square(measure, len(grasps), grip_config)
+    alternative = np.zeros(len(grasps), dtype=bool)
+    retried = np.flatnonzero(~passes)[:MAX_RETRIED] if alternatives else np.zeros(0, dtype=int)
+    if len(retried):
+        owner, alt_positions, alt_orientations = _alternative_poses(positions[retried], orientations[retried])
+        alt_clear, alt_measure = _judge(
+            alt_positions, alt_orientations, surface, grid, voxel_size, to_workspace, workspace_size
+        )
+        alt_passes = alt_clear & _grip_passes(alt_measure, len(owner), grip_config)
+        if alt_measure is not None:  # the network never scored these poses: the check must see both fingers
+            alt_passes &= (alt_measure.known > 0.0).all(axis=1)
+        alt_square = _square(alt_measure, len(owner), grip_config)
+        for slot, index in enumerate(retried):
+            candidates = np.flatnonzero(alt_passes & (owner == slot))
+            if not len(candidates):
+                continue
+            best = candidates[0] if alt_measure is None else candidates[_squarest(alt_measure, candidates)]
+            chosen[index] = _moved(grasps[index], alt_positions[best], alt_orientations[best], alt_measure, best)
+            square[index] = alt_square[best]
+            alternative[index] = True
+    kept_mask = np.array([g is not None for g in chosen])
+    if grid is not None and (square & kept_mask).any():
+        kept_mask &= square  # where some grasps grip squarely, only those
+    by_clearance = int((~clear & ~kept_mask).sum()) if surface is not None else None
+    by_grip = int((clear & ~kept_mask).sum()) if grid is not None else None
+    kept = [g for g, keep in zip(chosen, kept_mask, strict=True) if keep and g is not None]
+    return Checked(kept, by_clearance, by_grip, int((alternative & kept_mask).sum()))
+
+
+def _count(check_input: np.ndarray | None, dropped: int) -> int | None:
+    return None if check_input is None else dropped
+
+
+def _judge(
+    positions: np.ndarray,
+    orientations: Rotation,
+    surface: np.ndarray | None,
+    grid: np.ndarray | None,
+    voxel_size: float,
+    to_workspace: np.ndarray,
+    workspace_size: float,
+) -> tuple[np.ndarray, GripMeasure | None]:
+    """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
+    clear = np.ones(len(positions), dtype=bool)
+    if surface is not None:
+        clear = approach_is_clear(surface, positions, orientations.as_quat())
+        clear &= fingers_inside(positions, orientations.as_quat(), to_workspace, workspace_size)
+    measure = None
+    if grid is not None:
+        local_positions = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]
+        local = Rotation.from_matrix(to_workspace[:3, :3]) * orientations
+        measure = measure_grip(grid, voxel_size, local_positions, local.as_quat())
+    return clear, measure
+
+
+def _grip_passes(measure: GripMeasure | None, count: int, config: GripConfig) -> np.ndarray:
+    return np.ones(count, dtype=bool) if measure is None else measure.passes(config)
+
+
+def _square(measure: GripMeasure | None, count: int, config: GripConfig) -> np.ndarray:
+    """Which grasps grip at the preferred alignment (all False without a grip measure)."""
+    if measure is None:
+        return np.zeros(count, dtype=bool)
+    return measure.passes(GripConfig(config.min_contact, max(config.min_alignment, config.preferred_alignment)))
+
+
+def _squarest(measure: GripMeasure, rows: np.ndarray) -> int:
+    """Which of ``rows`` grips most squarely: the highest alignment of its worse finger (a finger the
+    volume does not show counts as square, as the check leaves it to the network)."""
+    alignment = np.where(measure.known[rows] > 0.0, measure.alignment[rows], 1.0)
+    return int(np.argmax(alignment.min(axis=1)))
+
+
+def _alternative_poses(positions: np.ndarray, orientations: Rotation) -> tuple[np.ndarray, np.ndarray, Rotation]:
+    """Every pose of :data:`ALTERNATIVES` for each grasp: the owning grasp's slot (K,), positions
+    (K, 3) and orientations, grasp by grasp in the order of the table."""
+    table = np.asarray(ALTERNATIVES, dtype=np.float64)
+    turns = Rotation.from_euler("ZY", table[:, :2], degrees=True)  # turn about z, then tilt about the new y
+    count, per = len(positions), len(table)
+    owner = np.repeat(np.arange(count), per)
+    base = orientations[owner]
+    moved = base * Rotation.concatenate([turns] * count)
+    # The pivot stays where it was (p' = p + R c - R' c), then the hand steps back along its approach.
+    step_back = np.tile(table[:, 2], count)[:, None] * moved.apply([0.0, 0.0, 1.0])
+    new_positions = positions[owner] + base.apply(PIVOT) - moved.apply(PIVOT) - step_back
+    return owner, new_positions, moved
+
+
+def _moved(grasp: Grasp, position: np.ndarray, orientation: Rotation, measure: GripMeasure | None,
+           row: int) -> Grasp:  # fmt: skip
+    """``grasp`` in another pose, its opening measured where the fingers met the surface."""
+    width = grasp.width
+    if measure is not None and (measure.known[row] == 1.0).all() and (measure.contact[row] == 1.0).all():
+        width = float(np.clip(MAX_OPENING - measure.reach[row].sum(), 0.0, MAX_OPENING))
+    return grasp.model_copy(
+        update={
+            "position": position.tolist(),
+            "orientation": orientation.as_quat().tolist(),
+            "approach": orientation.apply([0.0, 0.0, 1.0]).tolist(),
+            "width": width,
+        }
+    )
