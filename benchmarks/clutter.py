@@ -286,15 +286,12 @@ def format_row(row: dict) -> str:
 
 
 def objects_text(args: argparse.Namespace) -> str:
-    """Which objects the pile and packed scenes drop, for the settings line: VGN-style folders by
-    name, else the pybullet_data set, a source no training scene draws from."""
-    folders = [Path(folder).name for folder in (args.pile_objects, args.packed_objects) if folder]
-    if len(folders) == 2:
-        return f"objects {folders[0]} (pile), {folders[1]} (packed)"
-    if not folders:
-        return "pybullet_data objects"
-    scene = "pile" if args.pile_objects else "packed"
-    return f"objects {folders[0]} ({scene}), pybullet_data objects otherwise"
+    """Which objects the run's pile and packed scenes drop, for the settings line: a folder by its
+    name, else ``pybullet_data`` (a source no training scene draws from). Blocks say nothing."""
+    folders = {"pile": args.pile_objects, "packed": args.packed_objects}
+    scenes = [scene for scene in folders if any(s.rsplit("-", 1)[0] == scene for s in args.scenarios)]
+    names = [f"{scene} objects {Path(folders[scene]).name if folders[scene] else 'pybullet_data'}" for scene in scenes]
+    return ", ".join(names)
 
 
 def failures_cell(row: dict) -> str:
@@ -310,7 +307,7 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
         f"{looking(args.views, args.scan)}{', depth noise' if args.noise else ''}"
         f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
         f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}"
-        f", {objects_text(args)}",
+        f"{', ' + objects_text(args) if objects_text(args) else ''}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
         "| no grasp offered % of rounds "

@@ -60,10 +60,10 @@ def test_headline_table_and_readme_block(tmp_path: Path, monkeypatch):
         "plain first, then by options"
     )
     lines = table.splitlines()
-    assert lines.index("| blocks-5 | 56.2 / 44.4 | - | 87.6 / 90.1 |") < lines.index(
-        "| pile-5 | - | 56.2 / 44.4 | 62.3 / 46.4 |"
+    assert lines.index("| blocks-5 | 56.2 / 44.4 / - | - | 87.6 / 90.1 |") < lines.index(
+        "| pile-5 | - | 56.2 / 44.4 / - | 62.3 / 46.4 |"
     ), "the paper's order of scenarios"
-    assert "| pile-5, depth noise | - | 56.2 / 44.4 | - |" in lines
+    assert "| pile-5, depth noise | - | 56.2 / 44.4 / - | - |" in lines
     assert "2031" not in table, "the README's table carries no dates (the benchmark page does)"
     updated = report.readme_with_headline(README, table)
     assert "old table" not in updated and table in updated and updated.endswith("after\n")
@@ -151,7 +151,7 @@ def test_the_readme_table_shows_the_packaged_weights_only(tmp_path: Path, monkey
     clutter_results(tmp_path, [ROW, {**ROW, "model": "shipped00000", "scenario": "packed-5"}])
     table = report.headline_table(tmp_path)
     assert (
-        "| packed-5 | 56.2 / 44.4 |" in table and "pile-5" not in table
+        "| packed-5 | 56.2 / 44.4 / - |" in table and "pile-5" not in table
     )  # ROW's weights are an experiment's
 
 
@@ -194,7 +194,7 @@ def test_runs_under_other_sensors_get_their_own_rows(tmp_path: Path, monkeypatch
         settings="seed 1, rounds per scenario 100, side view(s)",
     )
     lines = report.headline_table(tmp_path).splitlines()
-    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in lines
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in lines
     assert any(
         line.startswith("| pile-5, structured-light sensor, camera pose error | 41.0") for line in lines
     )
@@ -208,7 +208,7 @@ def test_a_variant_is_named_on_the_page_and_left_out_of_the_readme(tmp_path: Pat
     clutter_results(tmp_path / "a-shipped", [ROW])
     control = clutter_results(tmp_path / "b-control", [{**ROW, "success_rate": 41.0}])
     (control / "variant.md").write_text("the grip check\nwithout its preference.\n")
-    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
     page = report.clutter_page(tmp_path)
     assert "variant: the grip check without its preference." in page
     assert page.count("variant:") == 1
@@ -224,7 +224,7 @@ def test_of_two_runs_on_one_day_the_readme_shows_the_later(tmp_path: Path, monke
                                               "measured": {**ROW["measured"], "time": "09:30:00"}}])  # fmt: skip
     clutter_results(tmp_path / "c-untimed", [{**ROW, "success_rate": 42.0}])
     lines = report.headline_table(tmp_path).splitlines()
-    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in lines
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in lines
     assert report.measured_at({"date": day}) < report.measured_at({"date": day, "time": "00:00:00"})
     assert report.measured_at(None) == ""
 
@@ -237,4 +237,23 @@ def test_the_readme_table_keeps_the_operating_threshold(tmp_path: Path, monkeypa
     later = {**ROW["measured"], "time": "23:00:00"}
     clutter_results(tmp_path / "a", [ROW])
     clutter_results(tmp_path / "b", [{**ROW, "threshold": 0.9, "success_rate": 75.6, "measured": later}])
-    assert "| pile-5 | 56.2 / 44.4 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
+
+
+def test_the_share_of_rounds_that_offered_no_grasp_stands_beside_success_and_cleared(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    recorded = {**ROW, "no_grasp_rate": 37.0}
+    clutter_results(tmp_path, [recorded])
+    line = next(line for line in report.clutter_page(tmp_path).splitlines() if line.startswith("| vgn+"))
+    assert "44.4 (40.0-48.8) | 37 | 72 / 7 / 90 / 0 |" in line
+    assert "| pile-5 | 56.2 / 44.4 / 37 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
+
+
+def test_runs_on_objects_of_another_source_get_their_own_row(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    clutter_results(tmp_path / "heldout", [ROW], settings="seed 1, six view(s), pile objects heldout")
+    other = {**ROW, "success_rate": 70.0, "measured": {"date": "2031-02-04"}}
+    clutter_results(tmp_path / "xsrc", [other], settings="seed 1, six view(s), pile objects pybullet_data")
+    lines = report.headline_table(tmp_path).splitlines()
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in lines, "the newer cross-source run does not replace it"
+    assert "| pile-5, cross-source objects | 70.0 / 44.4 / - | - |" in lines

@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sim_worker.results import TIMING_COLUMNS
+from sim_worker.results import ROUND_ENDINGS, TIMING_COLUMNS
 
 
 def read_csv(path: Path) -> list[dict[str, str]]:
@@ -43,6 +43,17 @@ def check_results(results: Path, rounds: int) -> dict:
         labels = [int(g["label"]) for g in attempted if g["round_id"] == r["round_id"]]
         assert "0,0" not in ",".join(map(str, labels[:-1])), "no attempt after two failures in a row"
         assert int(r["cleared"]) <= int(r["object_count"])
+        # ... and says which, with the objects it left and, for a look that offered nothing, its drops
+        assert r["ended"] in ROUND_ENDINGS
+        assert (r["ended"] == "cleared") == (int(r["remaining"]) == 0)
+        assert len(r["left"].split("+")) == int(r["remaining"]) if r["left"] else int(r["remaining"]) == 0
+        assert (r["ended"] == "failures") == (labels[-2:] == [0, 0] and int(r["remaining"]) > 0)
+        if r["ended"] == "no_grasp":
+            dropped = sum(int(r[key] or 0) for key in ("last_clearance_dropped", "last_grip_dropped"))
+            assert int(r["last_candidates"]) == dropped
+    endings = summary["endings"]
+    assert sum(endings[key] for key in ROUND_ENDINGS) == rounds
+    assert endings["threshold"] + endings["clearance"] + endings["grip"] == endings["no_grasp"]
     for g in grasp_rows:
         assert float(g["planning_time"]) > 0
         if g["client_planning_time"]:  # a wrist scan plans after every frame: no single request

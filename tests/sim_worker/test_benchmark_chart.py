@@ -57,3 +57,14 @@ def test_table_header_names_the_frames_a_round_used() -> None:
     assert "wrist scan" in wrist and "view(s)" not in wrist
     assert ClutterConfig(scene="pile", object_count=5, scan="wrist").looking == "wrist scan"
     assert ClutterConfig(scene="pile", object_count=5, views="side").looking == "side view(s)"
+
+
+def test_the_settings_line_names_the_objects_of_the_scenes_run() -> None:
+    def settings(*argv: str) -> str:
+        return markdown_table([], parse_args(list(argv))).splitlines()[0]
+
+    assert settings("--scenarios", "pile-5").endswith("six view(s), pile objects pybullet_data")
+    assert settings("--scenarios", "pile-5", "packed-5", "--pile-objects", "/x/heldout").endswith(
+        "pile objects heldout, packed objects pybullet_data"
+    )
+    assert "objects" not in settings("--scenarios", "blocks-5")
