@@ -16,6 +16,17 @@ for arg in "$@"; do
   esac
 done
 
+# apt-get, waiting (up to 10 minutes) for another apt run that holds the package lock instead of failing.
+apt_install() {
+  local sudo=""
+  [ "$(id -u)" -ne 0 ] && sudo="sudo"
+  if ! $sudo apt-get -o DPkg::Lock::Timeout=0 check >/dev/null 2>&1; then
+    echo "another apt run holds the package lock: waiting for it (up to 10 minutes)"
+  fi
+  $sudo apt-get -o DPkg::Lock::Timeout=600 update -qq &&
+    $sudo apt-get -o DPkg::Lock::Timeout=600 install -y -qq "$@" >/dev/null
+}
+
 # System libraries open3d links against, with their Debian packages.
 needed=(libusb-1.0.so.0:libusb-1.0-0 libGL.so.1:libgl1 libEGL.so.1:libegl1 libX11.so.6:libx11-6
         libudev.so.1:libudev1 libidn2.so.0:libidn2-0 libgomp.so.1:libgomp1)
@@ -25,10 +36,8 @@ for entry in "${needed[@]}"; do
 done
 if [ ${#missing[@]} -gt 0 ]; then
   if command -v apt-get >/dev/null 2>&1; then
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
     echo "installing ${missing[*]} (needed by open3d)"
-    $sudo apt-get update -qq && $sudo apt-get install -y -qq "${missing[@]}" >/dev/null
+    apt_install "${missing[@]}"
   else
     echo "warning: missing system libraries for open3d: ${missing[*]}; install them with your package manager" >&2
   fi
@@ -37,10 +46,8 @@ fi
 # HAProxy for the fleet tests (tests/fleet/: replicas behind the proxy `vgn-client serve --replicas` runs).
 if [ "$dev" = 1 ] && ! command -v haproxy >/dev/null 2>&1; then
   if command -v apt-get >/dev/null 2>&1; then
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
     echo "installing haproxy (the fleet tests)"
-    $sudo apt-get update -qq && $sudo apt-get install -y -qq haproxy >/dev/null
+    apt_install haproxy
   else
     echo "warning: haproxy is missing; the fleet tests will fail" >&2
   fi
@@ -49,10 +56,8 @@ fi
 # Headless Chromium for the viewer's browser test (tests/service/test_viewer.py fails without it).
 if [ "$dev" = 1 ] && { ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; }; then
   if command -v apt-get >/dev/null 2>&1; then
-    sudo=""
-    [ "$(id -u)" -ne 0 ] && sudo="sudo"
     echo "installing chromium and chromium-driver (the viewer's browser test)"
-    $sudo apt-get update -qq && $sudo apt-get install -y -qq chromium chromium-driver >/dev/null
+    apt_install chromium chromium-driver
   else
     echo "warning: chromium and chromedriver are missing; the viewer's browser test will fail" >&2
   fi

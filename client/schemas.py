@@ -44,7 +44,8 @@ SWITCHES = ("clearance", "grip", "turn_average")
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # NaN and infinity are refused as "a finite number" before any bound names a limit they break.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class Pose(_Model):

@@ -55,7 +55,9 @@ def _decode_png(data: bytes, depth_scale: float, expected_size: tuple[int, int])
                     f"{expected_size[0]}x{expected_size[1]}"
                 )
             raw = np.asarray(image)
-    except (UnidentifiedImageError, Image.DecompressionBombError, OSError, SyntaxError, ValueError) as error:
+    except UnidentifiedImageError:
+        raise InvalidInput(f"depth PNG cannot be read: {len(data)} bytes with no image header") from None
+    except (Image.DecompressionBombError, OSError, SyntaxError, ValueError) as error:
         raise InvalidInput(f"depth PNG cannot be read: {error}") from None
     if raw.min(initial=0) < 0:
         raise InvalidInput("depth PNG holds negative values")

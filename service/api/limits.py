@@ -16,15 +16,19 @@ class BodyTooLarge(HTTPException):
     """Raised from ``receive`` when a streamed body passes the limit. An HTTPException, so
     FastAPI's body parsing passes it through instead of turning it into a 400."""
 
-    def __init__(self, size: int, max_frame_bytes: int) -> None:
-        super().__init__(413, too_large_message(size, max_frame_bytes))
+    def __init__(self, size: int, max_frame_bytes: int, path: str = "") -> None:
+        super().__init__(413, too_large_message(size, max_frame_bytes, path))
 
 
-def too_large_message(size: int, max_frame_bytes: int) -> str:
-    """The 413 detail, the same whether the size was declared or counted. It spells out the sum,
-    so the limit it names is not mistaken for a different ``VGN_MAX_FRAME_BYTES``."""
+def too_large_message(size: int, max_frame_bytes: int, path: str = "") -> str:
+    """The 413 detail, the same whether the size was declared or counted. For a frame upload it
+    spells out the sum, so the limit it names is not mistaken for a different
+    ``VGN_MAX_FRAME_BYTES``; other requests carry no depth image, so theirs does not mention one."""
+    limit = max_frame_bytes + MULTIPART_OVERHEAD
+    if not path.endswith("/frames"):
+        return f"request body of {size}+ bytes exceeds the limit of {limit} bytes"
     return (
-        f"request body of {size}+ bytes exceeds the limit of {max_frame_bytes + MULTIPART_OVERHEAD} bytes: "
+        f"request body of {size}+ bytes exceeds the limit of {limit} bytes: "
         f"VGN_MAX_FRAME_BYTES={max_frame_bytes} for the depth image plus {MULTIPART_OVERHEAD} for the "
         "frame's meta and multipart headers"
     )
@@ -46,8 +50,9 @@ class BodySizeLimit:
             await self.app(scope, receive, send)
             return
         declared = dict(scope["headers"]).get(b"content-length")
+        path = scope.get("path", "")
         if declared is not None and declared.isdigit() and int(declared) > self.max_bytes:
-            await self._reject(send, int(declared))
+            await self._reject(send, int(declared), path)
             return
         received = 0
         response_started = False
@@ -58,7 +63,7 @@ class BodySizeLimit:
             if message["type"] == "http.request":
                 received += len(message.get("body", b""))
                 if received > self.max_bytes:
-                    raise BodyTooLarge(received, self.max_frame_bytes)
+                    raise BodyTooLarge(received, self.max_frame_bytes, path)
             return message
 
         async def tracking_send(message: Message) -> None:
@@ -70,10 +75,10 @@ class BodySizeLimit:
             await self.app(scope, counting_receive, tracking_send)
         except BodyTooLarge:
             if not response_started:
-                await self._reject(send, received)
+                await self._reject(send, received, path)
 
-    async def _reject(self, send: Send, size: int) -> None:
-        body = json.dumps({"detail": too_large_message(size, self.max_frame_bytes)}).encode()
+    async def _reject(self, send: Send, size: int, path: str) -> None:
+        body = json.dumps({"detail": too_large_message(size, self.max_frame_bytes, path)}).encode()
         await send(
             {
                 "type": "http.response.start",

@@ -1,6 +1,7 @@
 """``VGN_MAX_FRAME_BYTES`` as enforced by a real server with the default settings: it bounds the
 depth image; a whole request body may hold 64 KiB more (the frame's meta, multipart headers),
-and the 413 for a body says both numbers instead of naming the sum as ``VGN_MAX_FRAME_BYTES``."""
+and the 413 for a frame upload's body says both numbers instead of naming the sum as
+``VGN_MAX_FRAME_BYTES`` (other requests' 413 names the sum alone)."""
 
 from __future__ import annotations
 
@@ -68,13 +69,13 @@ def test_a_depth_image_over_the_limit_names_the_setting_with_its_value(default_s
     assert f"limit of {DEFAULT_LIMIT} bytes (VGN_MAX_FRAME_BYTES)" in detail
 
 
-def declared_body_answer(url: str, size: int) -> tuple[int, str]:
+def declared_body_answer(url: str, size: int, path: str = "/sessions/big/frames") -> tuple[int, str]:
     """Status and detail for a request that declares ``size`` body bytes and sends none: the limit
     is checked on the declared length, before any body is read."""
     parts = urlsplit(url)
     connection = http.client.HTTPConnection(parts.hostname, parts.port, timeout=30)
     try:
-        connection.putrequest("POST", "/sessions")
+        connection.putrequest("POST", path)
         connection.putheader("Content-Type", "application/json")
         connection.putheader("Content-Length", str(size))
         connection.endheaders()
@@ -91,3 +92,10 @@ def test_a_body_over_the_limit_spells_out_both_numbers(default_server) -> None:
     assert f"exceeds the limit of {body_limit} bytes" in detail
     assert f"VGN_MAX_FRAME_BYTES={DEFAULT_LIMIT}" in detail and f"plus {MULTIPART_OVERHEAD}" in detail
     assert f"{body_limit} bytes (VGN_MAX_FRAME_BYTES)" not in detail, "the sum is not the setting"
+
+
+def test_a_body_over_the_limit_that_is_no_frame_upload_does_not_talk_of_depth_images(default_server) -> None:
+    body_limit = DEFAULT_LIMIT + MULTIPART_OVERHEAD
+    status, detail = declared_body_answer(default_server.url, 100 * 2**20, path="/sessions")
+    assert status == 413
+    assert detail == f"request body of {100 * 2**20}+ bytes exceeds the limit of {body_limit} bytes"

@@ -15,7 +15,7 @@ from client.grpc_client import GRPCClient
 from client.schemas import Grasp, GraspQuery, GraspResult, SessionCreate
 from service.app import create_app
 from service.core import PlanningService
-from service.grip import GripConfig, gripping_grasps, measure_grip
+from service.grip import GripConfig, GripMeasure, gripping_grasps, measure_grip
 from service.grpc.server import build_server
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
@@ -270,3 +270,17 @@ def test_the_option_travels_whenever_set(grip):
     assert message.HasField("grip") is (grip is not None)
     assert GraspQuery(**convert.grasp_query_dict(message)).grip is grip
     assert GraspQuery(grip=grip).to_params().get("grip") == {True: "true", False: "false", None: None}[grip]
+
+
+def test_a_grip_exactly_at_the_least_contact_and_alignment_passes():
+    """The bounds are "at least": a finger on them passes, one just under either does not."""
+    config = GripConfig()
+    at = np.full((1, 2), config.min_alignment)
+    contact = np.full((1, 2), config.min_contact)
+    known = np.ones((1, 2))
+    reach = np.zeros((1, 2))
+    assert GripMeasure(known, contact, at, reach).passes(config).tolist() == [True]
+    assert GripMeasure(known, contact, np.nextafter(at, 0.0), reach).passes(config).tolist() == [False]
+    assert GripMeasure(known, np.nextafter(contact, 0.0), at, reach).passes(config).tolist() == [False]
+    square = np.full((1, 2), config.preferred_alignment)
+    assert GripMeasure(known, contact, square, reach).kept(config).tolist() == [True]
