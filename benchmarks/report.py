@@ -303,7 +303,8 @@ def headline_table(results: Path) -> str | None:
                 planners.append(row["planner"])
     if not cells:
         return None
-    planners.sort(key=lambda planner: planner.count("+"))  # plain first, then by the options added
+    # VGN plain first, then by the options added; the weight-free baseline last.
+    planners.sort(key=lambda planner: (planner.startswith("antipodal"), planner.count("+")))
     scenarios = sorted({s for s, _ in cells}, key=lambda s: (SCENARIO_ORDER.index(s.split(",")[0])
                        if s.split(",")[0] in SCENARIO_ORDER else 99, s))  # fmt: skip
     lines = [
