@@ -290,7 +290,10 @@ def objects_text(args: argparse.Namespace) -> str:
     name, else ``pybullet_data`` (a source no training scene draws from). Blocks say nothing."""
     folders = {"pile": args.pile_objects, "packed": args.packed_objects}
     scenes = [scene for scene in folders if any(s.rsplit("-", 1)[0] == scene for s in args.scenarios)]
-    names = [f"{scene} objects {Path(folders[scene]).name if folders[scene] else 'pybullet_data'}" for scene in scenes]
+    names = [
+        f"{scene} objects {Path(folders[scene]).name if folders[scene] else 'pybullet_data'}"
+        for scene in scenes
+    ]
     return ", ".join(names)
 
 

@@ -59,7 +59,7 @@ def check_grasps(
     voxel_size: float,
     workspace_pose: np.ndarray,
     workspace_size: float,
-    grip_config: GripConfig = GripConfig(),
+    grip_config: GripConfig = GripConfig(),  # noqa: B008 (frozen: one shared default is safe)
     alternatives: bool = True,
 ) -> Checked:
     """Run the clearance check on ``surface`` (world-frame points; None: not run) and the grip check
@@ -91,7 +91,9 @@ def check_grasps(
             if not len(candidates):
                 continue
             best = candidates[0] if alt_measure is None else candidates[_squarest(alt_measure, candidates)]
-            chosen[index] = _moved(grasps[index], alt_positions[best], alt_orientations[best], alt_measure, best)
+            chosen[index] = _moved(
+                grasps[index], alt_positions[best], alt_orientations[best], alt_measure, best
+            )
             square[index] = alt_square[best]
             alternative[index] = True
     kept_mask = np.array([g is not None for g in chosen])
@@ -137,7 +139,9 @@ def _square(measure: GripMeasure | None, count: int, config: GripConfig) -> np.n
     """Which grasps grip at the preferred alignment (all False without a grip measure)."""
     if measure is None:
         return np.zeros(count, dtype=bool)
-    return measure.passes(GripConfig(config.min_contact, max(config.min_alignment, config.preferred_alignment)))
+    return measure.passes(
+        GripConfig(config.min_contact, max(config.min_alignment, config.preferred_alignment))
+    )
 
 
 def _squarest(measure: GripMeasure, rows: np.ndarray) -> int:
@@ -147,7 +151,9 @@ def _squarest(measure: GripMeasure, rows: np.ndarray) -> int:
     return int(np.argmax(alignment.min(axis=1)))
 
 
-def _alternative_poses(positions: np.ndarray, orientations: Rotation) -> tuple[np.ndarray, np.ndarray, Rotation]:
+def _alternative_poses(
+    positions: np.ndarray, orientations: Rotation
+) -> tuple[np.ndarray, np.ndarray, Rotation]:
     """Every pose of :data:`ALTERNATIVES` for each grasp: the owning grasp's slot (K,), positions
     (K, 3) and orientations, grasp by grasp in the order of the table."""
     table = np.asarray(ALTERNATIVES, dtype=np.float64)

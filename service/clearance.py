@@ -181,14 +181,18 @@ def _segment_hits_box(
     return np.maximum(enter.max(axis=-1), first_u) <= np.minimum(leave.min(axis=-1), last_u)
 
 
-def fingers_inside(positions: np.ndarray, orientations: np.ndarray, to_workspace: np.ndarray, size: float) -> np.ndarray:
+def fingers_inside(
+    positions: np.ndarray, orientations: np.ndarray, to_workspace: np.ndarray, size: float
+) -> np.ndarray:
     """(G,) bool: the open hand's fingertips lie inside the workspace cube of side ``size`` (m),
     ``to_workspace`` (4×4) taking the grasps' frame to the cube's. Beyond the cube the volume shows
     nothing, so no check can vouch for the fingers there: on a table, a grasp at the cube's edge
     otherwise passes with its fingers in the table outside it."""
     tips = np.array([[0.0, 0.5 * MAX_OPENING, FINGER_DEPTH], [0.0, -0.5 * MAX_OPENING, FINGER_DEPTH]])
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4))
-    ends = np.asarray(positions, dtype=np.float64).reshape(-1, 1, 3) + np.stack([rotations.apply(t) for t in tips], 1)
+    ends = np.asarray(positions, dtype=np.float64).reshape(-1, 1, 3) + np.stack(
+        [rotations.apply(t) for t in tips], 1
+    )
     local = ends @ to_workspace[:3, :3].T + to_workspace[:3, 3]
     return np.all((local >= 0.0) & (local <= size), axis=(1, 2))
 
@@ -209,5 +213,7 @@ def clear_grasps(
     clear = approach_is_clear(points, positions, orientations, config)
     if workspace is not None:
         pose, size = workspace
-        clear &= fingers_inside(positions, orientations, np.linalg.inv(np.asarray(pose, dtype=np.float64)), size)
+        clear &= fingers_inside(
+            positions, orientations, np.linalg.inv(np.asarray(pose, dtype=np.float64)), size
+        )
     return [g for g, ok in zip(grasps, clear, strict=True) if ok]

@@ -240,7 +240,9 @@ def test_the_readme_table_keeps_the_operating_threshold(tmp_path: Path, monkeypa
     assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
 
 
-def test_the_share_of_rounds_that_offered_no_grasp_stands_beside_success_and_cleared(tmp_path: Path, monkeypatch):
+def test_the_share_of_rounds_that_offered_no_grasp_stands_beside_success_and_cleared(
+    tmp_path: Path, monkeypatch
+):
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     recorded = {**ROW, "no_grasp_rate": 37.0}
     clutter_results(tmp_path, [recorded])
@@ -255,5 +257,7 @@ def test_runs_on_objects_of_another_source_get_their_own_row(tmp_path: Path, mon
     other = {**ROW, "success_rate": 70.0, "measured": {"date": "2031-02-04"}}
     clutter_results(tmp_path / "xsrc", [other], settings="seed 1, six view(s), pile objects pybullet_data")
     lines = report.headline_table(tmp_path).splitlines()
-    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in lines, "the newer cross-source run does not replace it"
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in lines, (
+        "the newer cross-source run does not replace it"
+    )
     assert "| pile-5, cross-source objects | 70.0 / 44.4 / - | - |" in lines

@@ -13,8 +13,8 @@ from client.schemas import Grasp, GraspQuery, SessionCreate
 from service.checks import check_grasps
 from service.clearance import clear_grasps
 from service.core import PlanningService
-from service.grip import GripConfig, gripping_grasps
 from service.grid_surface import grid_surface_points
+from service.grip import GripConfig, gripping_grasps
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
@@ -72,7 +72,7 @@ def test_without_alternatives_the_chain_is_the_clearance_check_then_the_grip_che
     rng = np.random.default_rng(3)
     rotations = Rotation.from_euler("z", rng.uniform(0, 180, (40, 1)), degrees=True) * FROM_ABOVE
     pads = rng.uniform([0.08, 0.10, 0.12], [0.18, 0.17, 0.21], (40, 3))
-    grasps = [grasp_at(p, r) for p, r in zip(pads, rotations)]
+    grasps = [grasp_at(p, r) for p, r in zip(pads, rotations, strict=True)]
     surface = grid_surface_points(grid, VOXEL)
     clear = clear_grasps(grasps, surface)
     expected = gripping_grasps(clear, grid, VOXEL, np.eye(4), STRICT)
@@ -88,7 +88,9 @@ def test_without_alternatives_the_chain_is_the_clearance_check_then_the_grip_che
 @pytest.fixture(scope="module")
 def core() -> Iterator[PlanningService]:
     """The packaged model as a service starts by default, with the fallback down to any quality."""
-    service = PlanningService.from_settings(Settings(model=PACKAGED_MODEL, api_key=None, fallback_threshold=0.0))
+    service = PlanningService.from_settings(
+        Settings(model=PACKAGED_MODEL, api_key=None, fallback_threshold=0.0)
+    )
     yield service
     service.close()
 
