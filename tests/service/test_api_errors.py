@@ -234,8 +234,11 @@ BAD_FRAMES = [
     pytest.param(BadFrame(files_of(depth=NEGATIVE_DEPTH.tobytes()), 400, ("negative",)), id="raw-negative"),
     # PNG depth.
     pytest.param(
-        BadFrame(files_of(depth=b"this is not a PNG at all", media_type=PNG), 400,
-                 ("PNG cannot be read: 24 bytes with no image header",)),  # fmt: skip
+        BadFrame(
+            files_of(depth=b"this is not a PNG at all", media_type=PNG),
+            400,
+            ("PNG cannot be read: 24 bytes with no image header",),
+        ),  # fmt: skip
         id="png-garbage",
     ),
     pytest.param(

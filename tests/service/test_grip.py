@@ -212,7 +212,9 @@ def test_the_operator_sets_the_square_grip(trained):
     squarer = [g for g, square in zip(passing, kept, strict=True) if square]
     for preferred, expected in ((0.5, passing), (between, squarer)):
         core = PlanningService.from_settings(
-            Settings(model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred, alternatives=False)
+            Settings(
+                model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred, alternatives=False
+            )
         )
         try:
             session = fused_session(core)
