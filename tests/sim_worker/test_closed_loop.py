@@ -12,8 +12,16 @@ import pytest
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient
+from client.tracking import GraspTracker
 from sim_worker.camera import SIM_INTRINSICS, WORKSPACE_CENTRE, Camera, six_views
-from sim_worker.closed_loop import WRIST_FRAMES, WRIST_SWEEP_DEG, ApproachWatch, wrist_arc, wrist_scan
+from sim_worker.closed_loop import (
+    STABLE_PLANS,
+    WRIST_FRAMES,
+    WRIST_SWEEP_DEG,
+    ApproachWatch,
+    wrist_arc,
+    wrist_scan,
+)
 from sim_worker.disturbance import Disturber, PlannedDisturbance, nearest_object
 from sim_worker.grasping import translated
 from sim_worker.gripper import Gripper
@@ -117,6 +125,17 @@ def test_the_wrist_scan_stops_once_the_best_grasp_is_stable(shipped: VGNClient, 
     result = wrist_scan(shipped, session, camera, arc, {})
     assert result.answer.grasps and 2 <= result.frames < len(arc)
     assert shipped.session(session).frame_count == result.frames
+    # Plan after each frame by hand: the scan stopped at the first plan whose best grasp kept its id
+    # over the last STABLE_PLANS plans, not later.
+    replay, tracker, best = shipped.create_session(intrinsics=SIM_INTRINSICS).session_id, GraspTracker(), []
+    for pose in arc:
+        shipped.add_frame(replay, camera.render_depth(pose), pose)
+        tracked = tracker.update(shipped.grasps(replay).grasps)
+        best.append(tracked[0].track_id if tracked else None)
+        recent = best[-STABLE_PLANS:]
+        if len(recent) == STABLE_PLANS and recent[0] is not None and len(set(recent)) == 1:
+            break
+    assert len(best) == result.frames
 
 
 def test_the_wrist_arc_circles_the_scene_moving_in_and_looks_at_the_workspace():
