@@ -98,7 +98,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "service's, on unless its operator turned it off); averaged rows are labelled vgn+turns and their "
         "results go to folders ending in -turns (the antipodal planner is unaffected)",
     )
-    parser.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
+    parser.add_argument("--views", choices=["six", "side", "random"], default="six",
+                        help="six views; one fixed side view (GIGA's protocol); or one view drawn anew for every look "
+                        "(random); folders end in -side or -random")  # fmt: skip
     parser.add_argument("--disturb", type=float, default=0.0, metavar="P",
                         help="displace the aimed-at object during the approach with probability P per attempt "
                         "(docs/closed-loop.md); folders end in -disturbP")  # fmt: skip
@@ -167,7 +169,7 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
     for planner in args.planners:
         for selection in args.selections:
             for scenario in args.scenarios:
-                suffix = ("-noise" if args.noise else "") + ("-side" if args.views == "side" else "")
+                suffix = ("-noise" if args.noise else "") + (f"-{args.views}" if args.views != "six" else "")
                 suffix += (f"-{args.sensor}" if args.sensor else "") + ("-pose" if args.pose_error else "")
                 suffix += "-turns" if args.turn_average and planner == "vgn" else ""
                 suffix += "-clearance" if args.clearance else ""

@@ -238,7 +238,7 @@ def is_noisy(folder: Path, row: dict[str, Any]) -> bool:
 
 
 #: What a run's settings line says about how the scene was seen, and how tables name it.
-CONDITIONS = [("objects pybullet_data", "cross-source objects"), ("side view", "one side view"), ("depth noise", "depth noise"), ("dex sensor", "depth noise"),
+CONDITIONS = [("objects pybullet_data", "cross-source objects"), ("side view", "one side view"), ("random view", "one random view"), ("depth noise", "depth noise"), ("dex sensor", "depth noise"),
               ("structured-light sensor", "structured-light sensor"), ("camera pose error", "camera pose error"),
               ("disturbances", "disturbed"), ("closed loop", "closed loop"), ("wrist scan", "wrist scan")]  # fmt: skip
 

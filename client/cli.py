@@ -227,9 +227,10 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
     )
     clear.add_argument(
         "--views",
-        choices=["six", "side"],
+        choices=["six", "side", "random"],
         default="six",
-        help="six views on a circle (VGN) or a single side view",
+        help="six views on a circle (VGN), a single fixed side view (GIGA), or a single view drawn anew for "
+        "every look (a random point of the upper hemisphere)",
     )
     clear.add_argument(
         "--selection",

@@ -18,7 +18,7 @@ import numpy as np
 from client.http import VGNClient
 from client.schemas import Grasp, GraspResult
 from sim_worker import images
-from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, side_view, six_views
+from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views, side_view, six_views
 from sim_worker.closed_loop import (
     ApproachWatch,
     elapsed_ms,
@@ -44,7 +44,8 @@ MAX_STOPS_IN_A_ROW = 4
 ClutterScene = Literal["blocks", "pile", "packed"]
 #: Depth-sensor models (docs/sensors.md): Dex-Net's noise, or a structured-light camera's errors.
 Sensor = Literal["dex", "structured-light"]
-Views = Literal["six", "side"]
+#: VGN's six fixed views, GIGA's one fixed side view, or one view drawn anew for every look.
+Views = Literal["six", "side", "random"]
 #: How a round looks before each grasp: the fixed views, or a wrist camera's arc (closed_loop.py).
 Scan = Literal["fixed", "wrist"]
 Selection = Literal["best", "random"]
@@ -145,13 +146,19 @@ class ClutterConfig:
         return None
 
 
-def camera_views(kind: str) -> list[np.ndarray]:
-    """The camera poses of a round: VGN's six views on a circle, or one side view."""
+def camera_views(kind: str, rng: np.random.Generator | None = None) -> list[np.ndarray]:
+    """The camera poses of a look: VGN's six views on a circle, one side view, or one view drawn
+    from ``rng`` as data generation draws them (0.48-0.72 m from the workspace centre, up to 45
+    degrees from the vertical, any azimuth)."""
     if kind == "six":
         return six_views()
     if kind == "side":
         return [side_view()]
-    raise ValueError(f"unknown views {kind!r}: use 'six' or 'side'")
+    if kind == "random":
+        if rng is None:
+            raise ValueError("random views need the round's random stream")
+        return random_views(rng, 1)
+    raise ValueError(f"unknown views {kind!r}: use 'six', 'side' or 'random'")
 
 
 class ClutterRemoval:
@@ -165,7 +172,7 @@ class ClutterRemoval:
         self.gripper = Gripper(self.world)
         self.camera = Camera(self.world, noise=config.depth_noise())
         self.pose_error = PoseError() if config.pose_error else None
-        self.views = camera_views(config.views)
+        self.views = [] if config.views == "random" else camera_views(config.views)
         self.objects = object_set(config.objects or "", config.scene)
         self.image_dir = image_dir
         self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
@@ -263,6 +270,8 @@ class ClutterRemoval:
             arc = wrist_arc(float(rng.uniform(0.0, 2.0 * np.pi)))
             scan = wrist_scan(self.vgn, self.session_id, self.camera, arc, self._query(), self._reported_pose)
             return Observed(scan.answer, scan.frames, scan.integration_ms, elapsed_ms(started), None)
+        if self.config.views == "random":
+            self.views = camera_views("random", rng)
         integration_ms = self._observe()
         client_started = time.perf_counter()
         answer = self.vgn.grasps(self.session_id, **self._query())

@@ -8,7 +8,7 @@ import numpy as np
 from PIL import Image
 
 from benchmarks.chart import chart_series
-from benchmarks.clutter import PAPER_GPD, PAPER_TABLE_1, main, markdown_table, parse_args
+from benchmarks.clutter import PAPER_GPD, PAPER_TABLE_1, combinations, main, markdown_table, parse_args
 from sim_worker.clutter import ClutterConfig
 from sim_worker.results import ResultsFolder, RoundRecord
 
@@ -68,3 +68,12 @@ def test_the_settings_line_names_the_objects_of_the_scenes_run() -> None:
         "pile objects heldout, packed objects pybullet_data"
     )
     assert "objects" not in settings("--scenarios", "blocks-5")
+
+
+def test_one_random_view_gets_its_own_folders_and_rows() -> None:
+    args = parse_args(
+        ["--views", "random", "--scenarios", "pile-5", "--planners", "vgn", "--selections", "random"]
+    )
+    folders = [folder.name for *_, folder in combinations(args)]
+    assert folders == ["vgn-random-pile-5-random"]
+    assert "random view(s)" in markdown_table([], args).splitlines()[0]

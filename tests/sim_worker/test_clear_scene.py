@@ -5,9 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from client.schemas import ModelInfo
+from sim_worker.camera import WORKSPACE_CENTRE
+from sim_worker.clutter import camera_views
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 from tests.helpers.runs import check_results, clear_scene, read_csv
@@ -339,3 +342,24 @@ def test_sensor_options_make_their_own_benchmark_folders():
                        "--sensor", "structured-light", "--pose-error", "--no-turn-average", "--no-clearance"])  # fmt: skip
     ((_, _, _, folder),) = combinations(args)
     assert folder.name == "antipodal-best-pile-5-structured-light-pose"
+
+
+def test_a_random_view_is_drawn_anew_for_every_look(tmp_path: Path, monkeypatch):
+    """``--views random``: one frame per look, from a camera drawn from the round's own stream, so
+    that the same seed sees the same views and two looks see the scene from two places."""
+    rng_a, rng_b = np.random.default_rng([1, 0]), np.random.default_rng([1, 0])
+    first, second = camera_views("random", rng_a)[0], camera_views("random", rng_a)[0]
+    assert np.allclose(first, camera_views("random", rng_b)[0]) and not np.allclose(first, second)
+    centre = np.asarray(WORKSPACE_CENTRE)
+    for pose in (first, second):
+        offset = pose[:3, 3] - centre
+        assert 0.48 <= np.linalg.norm(offset) <= 0.72 and offset[2] > 0  # above the table
+    monkeypatch.setenv("VGN_MODEL", "none")
+    results = tmp_path / "random-view"
+    run = clear_scene("--planner", "antipodal", "--views", "random", "--rounds", "1", "--object-count", "2",
+                      "--results", str(results))  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    check_results(results, 1)
+    rows = read_csv(results / "grasps.csv")
+    assert {row["frames"] for row in rows} <= {"1"}
+    assert json.loads((results / "config.json").read_text())["views"] == "random"
