@@ -521,6 +521,31 @@ def configuration_page() -> str:
     return "\n".join(lines) + "\n"
 
 
+def command_options_page(command: str) -> str:
+    """Every option of ``vgn-client COMMAND`` with its default and help, from the parser itself, so
+    that the list in the docs cannot fall behind the command."""
+    from client.cli import build_parser
+
+    # Defaults read from the environment (VGN_URL, VGN_API_KEY) are the documented ones when unset.
+    saved = {name: os.environ.pop(name) for name in list(os.environ) if name.startswith("VGN_")}
+    try:
+        commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    finally:
+        os.environ.update(saved)
+    parser = commands.choices[command]
+    lines = ["| option | default | meaning |", "| --- | --- | --- |"]
+    for action in parser._actions:
+        if not action.option_strings or action.help == argparse.SUPPRESS or "--help" in action.option_strings:
+            continue
+        names = ", ".join(f"`{name}`" for name in action.option_strings)
+        if action.choices:
+            names += " " + "\\|".join(map(str, action.choices))
+        default = "-" if action.default in (None, False, argparse.SUPPRESS) else f"`{action.default}`"
+        text = (action.help or "").replace("%(default)s", str(action.default))
+        lines.append(f"| {names} | {cell(default)} | {cell(text)} |")
+    return "\n".join(lines) + "\n"
+
+
 def schema_type(schema: dict[str, Any]) -> str:
     """A JSON schema's type in a few words: ``integer``, ``Pose``, ``string or null``, ``vgn | antipodal``."""
     if "$ref" in schema:
@@ -876,6 +901,7 @@ def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
             lambda: training_data_page(json.loads(DATA_MANIFEST.read_text()), results),
         ),
         "configuration.md": ("service/settings.py", configuration_page),
+        "clear-scene-options.md": ("client/cli.py", lambda: command_options_page("clear-scene")),
         "http-endpoints.md": ("openapi.json", lambda: endpoints_page(json.loads(OPENAPI.read_text()))),
         "model-card.md": ("service/models/vgn.card.json", lambda: card_page(json.loads(CARD.read_text()))),
     }

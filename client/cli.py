@@ -210,7 +210,8 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
     )
     _add_sim_options(clear)
     clear.add_argument("--model", help="weights for the embedded service (sets its VGN_MODEL)")
-    clear.add_argument("--scene", choices=["blocks", "pile", "packed"], default="blocks")
+    clear.add_argument("--scene", choices=["blocks", "pile", "packed"], default="blocks",
+                       help="what the table holds: blocks, a pile of objects, or objects packed upright")  # fmt: skip
     clear.add_argument(
         "--objects",
         help="object set: 'blocks', 'pybullet' or a folder of URDFs (default: the scene's built-in set)",
@@ -452,7 +453,8 @@ def _add_sim_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sim", action="store_true", help="run in simulation (the only mode so far)")
     parser.add_argument("--url", default=os.environ.get("VGN_URL"),
                         help="service address (env VGN_URL); when absent, an embedded service is started")  # fmt: skip
-    parser.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"))
+    parser.add_argument("--api-key", default=os.environ.get("VGN_API_KEY"),
+                        help="the service's API key, if it requires one (env VGN_API_KEY)")  # fmt: skip
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto",
                         help="PyBullet renderer: EGL when it loads, else TinyRenderer (same depth)")  # fmt: skip
     add_ray_option(parser)
