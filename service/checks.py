@@ -77,21 +77,24 @@ def check_grasps(
     chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
     square = _square(measure, len(grasps), grip_config)
     alternative = np.zeros(len(grasps), dtype=bool)
-    retried = np.flatnonzero(~passes)[:MAX_RETRIED] if alternatives else np.zeros(0, dtype=int)
+    # Only the grip check can vouch for a pose the network never scored: without it, no alternatives.
+    retried = (
+        np.flatnonzero(~passes)[:MAX_RETRIED] if alternatives and grid is not None else np.zeros(0, dtype=int)
+    )
     if len(retried):
         owner, alt_positions, alt_orientations = _alternative_poses(positions[retried], orientations[retried])
         alt_clear, alt_measure = _judge(
             alt_positions, alt_orientations, surface, grid, voxel_size, to_workspace, workspace_size
         )
-        alt_passes = alt_clear & _grip_passes(alt_measure, len(owner), grip_config)
+        assert alt_measure is not None  # a grid was given: the grip check ran
         alt_square = _square(alt_measure, len(owner), grip_config)
-        if alt_measure is not None:  # the network never scored these poses: both fingers must grip squarely
-            alt_passes &= (alt_measure.known > 0.0).all(axis=1) & alt_square
+        both_seen = (alt_measure.known > 0.0).all(axis=1)
+        alt_passes = alt_clear & alt_square & both_seen  # the square grip implies passing the check
         for slot, index in enumerate(retried):
             candidates = np.flatnonzero(alt_passes & (owner == slot))
             if not len(candidates):
                 continue
-            best = candidates[0] if alt_measure is None else candidates[_squarest(alt_measure, candidates)]
+            best = candidates[_squarest(alt_measure, candidates)]
             chosen[index] = _moved(
                 grasps[index], alt_positions[best], alt_orientations[best], alt_measure, best
             )
