@@ -5,9 +5,10 @@ hit the observed surface) or the grip check (the fingers would not meet the surf
 drops it, the location itself is often graspable: turned about its approach the fingers meet two
 faces squarely, tilted a little the palm misses a neighbour. So each dropped grasp is tried again
 in the poses of :data:`ALTERNATIVES`, and the one that passes both checks and grips most squarely
-replaces it, keeping the
-network's quality for the location. Without this a look whose few confident locations all fail a
-check offers nothing, and the robot stops with objects on the table.
+replaces it, keeping the network's quality for the location. The network never scored these poses,
+so the grip check must vouch for them fully: both fingers seen, meeting the surface at the square
+grip (``GripConfig.preferred_alignment``), not merely passing. Without this a look whose few
+confident locations all fail a check offers nothing, and the robot stops with objects on the table.
 
 Frames (docs/conventions.md): grasp frame +z approach, y closing axis, origin between the finger
 bases; tilts turn the hand about the middle of its pads so that the fingers stay on the object.
@@ -76,21 +77,24 @@ def check_grasps(
     chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
     square = _square(measure, len(grasps), grip_config)
     alternative = np.zeros(len(grasps), dtype=bool)
-    retried = np.flatnonzero(~passes)[:MAX_RETRIED] if alternatives else np.zeros(0, dtype=int)
+    # Only the grip check can vouch for a pose the network never scored: without it, no alternatives.
+    retried = (
+        np.flatnonzero(~passes)[:MAX_RETRIED] if alternatives and grid is not None else np.zeros(0, dtype=int)
+    )
     if len(retried):
         owner, alt_positions, alt_orientations = _alternative_poses(positions[retried], orientations[retried])
         alt_clear, alt_measure = _judge(
             alt_positions, alt_orientations, surface, grid, voxel_size, to_workspace, workspace_size
         )
-        alt_passes = alt_clear & _grip_passes(alt_measure, len(owner), grip_config)
-        if alt_measure is not None:  # the network never scored these poses: the check must see both fingers
-            alt_passes &= (alt_measure.known > 0.0).all(axis=1)
+        assert alt_measure is not None  # a grid was given: the grip check ran
         alt_square = _square(alt_measure, len(owner), grip_config)
+        both_seen = (alt_measure.known > 0.0).all(axis=1)
+        alt_passes = alt_clear & alt_square & both_seen  # the square grip implies passing the check
         for slot, index in enumerate(retried):
             candidates = np.flatnonzero(alt_passes & (owner == slot))
             if not len(candidates):
                 continue
-            best = candidates[0] if alt_measure is None else candidates[_squarest(alt_measure, candidates)]
+            best = candidates[_squarest(alt_measure, candidates)]
             chosen[index] = _moved(
                 grasps[index], alt_positions[best], alt_orientations[best], alt_measure, best
             )
