@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from client.connect import connect
+from client.extras import missing_extra
 from client.http import (
     AsyncVGNClient,
     BadRequest,
@@ -57,9 +58,7 @@ def __getattr__(name: str) -> Any:
     try:
         from client.grpc_client import GRPCClient
     except ImportError as error:
-        raise ImportError(
-            f"GRPCClient needs the grpc extra ({error}): pip install 'vgn-service[grpc]'", name=name
-        ) from None
+        raise ImportError(missing_extra("GRPCClient", "grpc", error), name=name) from None
     globals()["GRPCClient"] = GRPCClient  # later look-ups skip this function
     return GRPCClient
 

@@ -31,6 +31,7 @@ import httpx
 
 from client.connect import connect, is_grpc_url
 from client.embedded import bind_error
+from client.extras import missing_extra
 from client.http import DEFAULT_URL, InvalidRequest, VGNClient, VGNError
 from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
@@ -274,7 +275,7 @@ def _serve(args: argparse.Namespace) -> int:
     try:
         import uvicorn
     except ImportError:
-        print("serving needs the service extra: pip install 'vgn-service[service]'", file=sys.stderr)
+        print(f"error: {missing_extra('serving', 'service')}", file=sys.stderr)
         return 2
     if args.replicas is not None:
         return _serve_fleet(args)
@@ -439,11 +440,8 @@ def _run_sim_command(args: argparse.Namespace) -> int:
     try:
         module = importlib.import_module(SIM_COMMANDS[args.command])
     except ImportError as error:
-        print(
-            f"error: {args.command} --sim needs the sim extra ({error}): pip install 'vgn-service[sim]' "
-            "(and the service extra for the embedded service, or point --url at a running one)",
-            file=sys.stderr,
-        )
+        then = " (and the service extra for the embedded service, or point --url at a running one)"
+        print(f"error: {missing_extra(f'{args.command} --sim', 'sim', error, then)}", file=sys.stderr)
         return 2
     return module.run(args)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
+from client.extras import missing_extra
 from client.http import VGNClient
 from client.recovery import DEFAULT_REPLAY, Replay
 
@@ -36,7 +37,5 @@ def connect(
     try:
         from client.grpc_client import GRPCClient
     except ImportError as error:
-        raise ImportError(
-            f"grpc:// URLs need the grpc extra ({error}): pip install 'vgn-service[grpc]'"
-        ) from None
+        raise ImportError(missing_extra("a grpc:// URL", "grpc", error)) from None
     return GRPCClient(url, api_key=api_key, timeout=timeout, replay=replay)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from fastapi import FastAPI
 from starlette.formparsers import MultiPartParser
 
+from client.extras import missing_extra
 from service.api.docs import docs_urls, install_docs
 from service.api.errors import install_error_handlers
 from service.api.limits import MULTIPART_OVERHEAD, BodySizeLimit
@@ -89,9 +90,7 @@ def start_grpc(service: PlanningService, settings: Settings, metrics: ServiceMet
     try:
         from service.grpc.server import build_server
     except ImportError as error:
-        raise RuntimeError(
-            f"gRPC needs the grpc extra ({error}): pip install 'vgn-service[grpc]', or set VGN_GRPC_PORT=0"
-        ) from None
+        raise RuntimeError(missing_extra("gRPC", "grpc", error, ", or set VGN_GRPC_PORT=0")) from None
     server, port = build_server(service, settings.grpc_host, settings.grpc_port, metrics)
     log.info("gRPC: listening on %s:%d", settings.grpc_host, port)
     return server

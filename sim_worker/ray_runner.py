@@ -21,6 +21,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+from client.extras import missing_extra
+
 if TYPE_CHECKING:
     import argparse
 
@@ -47,10 +49,7 @@ def import_ray() -> ModuleType:
     try:
         import ray
     except ImportError as error:
-        raise RayMissing(
-            f"--ray needs the ray extra ({error}): pip install 'vgn-service[ray]' "
-            "(on every node of the cluster)"
-        ) from None
+        raise RayMissing(missing_extra("--ray", "ray", error, " (on every node of the cluster)")) from None
     return ray
 
 

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from client.extras import missing_extra
+
 
 @dataclass(frozen=True)
 class EvaluationConfig:
@@ -45,7 +47,7 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
         from sim_worker.clutter import ClutterConfig, ClutterRemoval
         from sim_worker.results import ResultsFolder
     except ImportError as error:
-        raise RuntimeError(f"the executed-grasp evaluation needs the simulator: {error}") from error
+        raise RuntimeError(missing_extra("the executed-grasp evaluation", "sim", error)) from error
     clutter = ClutterConfig(scene=config.scene, objects=config.objects, object_count=config.object_count,
                             rounds=config.rounds, seed=config.seed, renderer="auto")  # fmt: skip
     results.mkdir(parents=True, exist_ok=True)
