@@ -1,17 +1,13 @@
-"""The checks a planned grasp must pass, chained in one place, with alternatives for those they drop.
+"""The checks a planned grasp must pass, chained in one place, with other poses for those they drop.
 
-The network answers one orientation per location. When the clearance check (the open hand would
-hit the observed surface) or the grip check (the fingers would not meet the surface squarely)
-drops it, the location itself is often graspable: turned about its approach the fingers meet two
-faces squarely, tilted a little the palm misses a neighbour. So each dropped grasp is tried again
-in the poses of :data:`ALTERNATIVES`, and the one that passes both checks and grips most squarely
-replaces it, keeping the network's quality for the location. The network never scored these poses,
-so the grip check must vouch for them fully: both fingers seen, meeting the surface at the square
-grip (``GripConfig.preferred_alignment``), not merely passing. Without this a look whose few
-confident locations all fail a check offers nothing, and the robot stops with objects on the table.
-
-Frames (docs/conventions.md): grasp frame +z approach, y closing axis, origin between the finger
-bases; tilts turn the hand about the middle of its pads so that the fingers stay on the object.
+The network answers one orientation per location. When the clearance or the grip check drops it,
+the location is often still graspable: turned about its approach the fingers meet two faces
+squarely, tilted the palm misses a neighbour, stepped back the fingertips miss the table. So each
+dropped grasp is tried again in the poses of :data:`ALTERNATIVES`; the network never scored these,
+so a pose counts only when the grip check sees both fingers grip at the square grip
+(``GripConfig.preferred_alignment``), and the squarest replaces the grasp with the location's
+quality. Without this a look whose few confident locations fail a check offers nothing, and the
+robot stops with objects on the table. Frames: docs/conventions.md (tilts turn about the pads).
 """
 
 from __future__ import annotations
