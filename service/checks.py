@@ -79,13 +79,15 @@ def check_grasps(
     )
     if len(retried):
         owner, alt_positions, alt_orientations = _alternative_poses(positions[retried], orientations[retried])
-        alt_clear, alt_measure = _judge(
-            alt_positions, alt_orientations, surface, grid, voxel_size, to_workspace, workspace_size
-        )
-        assert alt_measure is not None  # a grid was given: the grip check ran
+        # The grip check first: it is the cheaper one and drops most poses, so the clearance check
+        # (the costly one, over every surface point) runs only on the poses it vouches for.
+        alt_measure = _grip_measure(alt_positions, alt_orientations, grid, voxel_size, to_workspace)
         alt_square = _square(alt_measure, len(owner), grip_config)
-        both_seen = (alt_measure.known > 0.0).all(axis=1)
-        alt_passes = alt_clear & alt_square & both_seen  # the square grip implies passing the check
+        alt_passes = alt_square & (alt_measure.known > 0.0).all(axis=1)  # square implies passing
+        vouched = np.flatnonzero(alt_passes)
+        if surface is not None and len(vouched):
+            alt_passes[vouched] = _clear(alt_positions[vouched], alt_orientations[vouched], surface, to_workspace,
+                                         workspace_size)  # fmt: skip
         for slot, index in enumerate(retried):
             candidates = np.flatnonzero(alt_passes & (owner == slot))
             if not len(candidates):
@@ -121,14 +123,25 @@ def _judge(
     """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
     clear = np.ones(len(positions), dtype=bool)
     if surface is not None:
-        clear = approach_is_clear(surface, positions, orientations.as_quat())
-        clear &= fingers_inside(positions, orientations.as_quat(), to_workspace, workspace_size)
-    measure = None
-    if grid is not None:
-        local_positions = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]
-        local = Rotation.from_matrix(to_workspace[:3, :3]) * orientations
-        measure = measure_grip(grid, voxel_size, local_positions, local.as_quat())
+        clear = _clear(positions, orientations, surface, to_workspace, workspace_size)
+    measure = None if grid is None else _grip_measure(positions, orientations, grid, voxel_size, to_workspace)
     return clear, measure
+
+
+def _clear(positions: np.ndarray, orientations: Rotation, surface: np.ndarray, to_workspace: np.ndarray,
+           workspace_size: float) -> np.ndarray:  # fmt: skip
+    """(G,) bool: the open hand's approach misses ``surface`` and its fingers stay in the cube."""
+    quaternions = orientations.as_quat()
+    clear = approach_is_clear(surface, positions, quaternions)
+    return clear & fingers_inside(positions, quaternions, to_workspace, workspace_size)
+
+
+def _grip_measure(positions: np.ndarray, orientations: Rotation, grid: np.ndarray, voxel_size: float,
+                  to_workspace: np.ndarray) -> GripMeasure:  # fmt: skip
+    """The grip check's measure of world-frame grasps on the workspace-frame ``grid``."""
+    local_positions = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]
+    local = Rotation.from_matrix(to_workspace[:3, :3]) * orientations
+    return measure_grip(grid, voxel_size, local_positions, local.as_quat())
 
 
 def _grip_passes(measure: GripMeasure | None, count: int, config: GripConfig) -> np.ndarray:
