@@ -130,3 +130,17 @@ def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():
     assert result.grasps == [] and result.clearance_dropped == 1
     inside = grasp_at((0.15, 0.05, 0.075))
     assert checked([inside], grid, alternatives=False).clearance_dropped == 0
+
+
+def test_without_the_grip_check_no_other_pose_is_tried():
+    """Only the grip check can vouch for a pose the network never scored: a grasp on a post whose
+    fingers open outside the cube stays dropped without it, and is turned into the cube with it."""
+    grid = grid_of(box((0.135, 0.02, 0.0), (0.165, 0.05, 0.20)))  # a 3 cm post 2 cm from the cube's edge
+    surface = grid_surface_points(grid, VOXEL)
+    across = grasp_at((0.15, 0.035, 0.17))  # closing along y: one finger opens outside the cube
+    without_grip = check_grasps([across], surface, None, VOXEL, np.eye(4), SIZE, STRICT, True)
+    assert without_grip.grasps == [] and without_grip.replaced == 0 and without_grip.clearance_dropped == 1
+    with_grip = check_grasps([across], surface, grid, VOXEL, np.eye(4), SIZE, STRICT, True)
+    assert with_grip.replaced == 1 and len(with_grip.grasps) == 1
+    closing = Rotation.from_quat(with_grip.grasps[0].orientation).apply([0.0, 1.0, 0.0])
+    assert abs(closing[0]) > 0.97  # turned to close along x, both fingers inside the cube
