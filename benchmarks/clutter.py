@@ -307,12 +307,13 @@ def failures_cell(row: dict) -> str:
 
 def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
     """The results beside the paper's VGN and GPD figures, as a Markdown table with a line on the settings."""
+    objects = objects_text(args)
     lines = [
         f"seed {args.seed}, rounds per scenario {'as listed' if args.report else args.rounds}, "
         f"{looking(args.views, args.scan)}{', depth noise' if args.noise else ''}"
         f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
         f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}"
-        f"{', ' + objects_text(args) if objects_text(args) else ''}",
+        f"{f', {objects}' if objects else ''}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
         "| no grasp offered % of rounds "

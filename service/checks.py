@@ -71,7 +71,7 @@ def check_grasps(
     clear, measure = _judge(positions, orientations, surface, grid, voxel_size, to_workspace, workspace_size)
     passes = clear & _grip_passes(measure, len(grasps), grip_config)
     chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
-    square = _square(measure, len(grasps), grip_config)
+    square = np.zeros(len(grasps), dtype=bool) if measure is None else measure.square(grip_config)
     alternative = np.zeros(len(grasps), dtype=bool)
     # Only the grip check can vouch for a pose the network never scored: without it, no alternatives.
     retried = (
@@ -82,7 +82,7 @@ def check_grasps(
         # The grip check first: it is the cheaper one and drops most poses, so the clearance check
         # (the costly one, over every surface point) runs only on the poses it vouches for.
         alt_measure = _grip_measure(alt_positions, alt_orientations, grid, voxel_size, to_workspace)
-        alt_square = _square(alt_measure, len(owner), grip_config)
+        alt_square = alt_measure.square(grip_config)
         alt_passes = alt_square & (alt_measure.known > 0.0).all(axis=1)  # square implies passing
         vouched = np.flatnonzero(alt_passes)
         if surface is not None and len(vouched):
@@ -148,20 +148,10 @@ def _grip_passes(measure: GripMeasure | None, count: int, config: GripConfig) ->
     return np.ones(count, dtype=bool) if measure is None else measure.passes(config)
 
 
-def _square(measure: GripMeasure | None, count: int, config: GripConfig) -> np.ndarray:
-    """Which grasps grip at the preferred alignment (all False without a grip measure)."""
-    if measure is None:
-        return np.zeros(count, dtype=bool)
-    return measure.passes(
-        GripConfig(config.min_contact, max(config.min_alignment, config.preferred_alignment))
-    )
-
-
 def _squarest(measure: GripMeasure, rows: np.ndarray) -> int:
-    """Which of ``rows`` grips most squarely: the highest alignment of its worse finger (a finger the
-    volume does not show counts as square, as the check leaves it to the network)."""
-    alignment = np.where(measure.known[rows] > 0.0, measure.alignment[rows], 1.0)
-    return int(np.argmax(alignment.min(axis=1)))
+    """Which of ``rows`` (poses whose both fingers the check sees) grips most squarely: the highest
+    alignment of its worse finger."""
+    return int(np.argmax(measure.alignment[rows].min(axis=1)))
 
 
 def _alternative_poses(
@@ -181,11 +171,12 @@ def _alternative_poses(
     return owner, new_positions, moved
 
 
-def _moved(grasp: Grasp, position: np.ndarray, orientation: Rotation, measure: GripMeasure | None,
-           row: int) -> Grasp:  # fmt: skip
+def _moved(
+    grasp: Grasp, position: np.ndarray, orientation: Rotation, measure: GripMeasure, row: int
+) -> Grasp:
     """``grasp`` in another pose, its opening measured where the fingers met the surface."""
     width = grasp.width
-    if measure is not None and (measure.known[row] == 1.0).all() and (measure.contact[row] == 1.0).all():
+    if (measure.known[row] == 1.0).all() and (measure.contact[row] == 1.0).all():
         width = float(np.clip(MAX_OPENING - measure.reach[row].sum(), 0.0, MAX_OPENING))
     return grasp.model_copy(
         update={

@@ -107,10 +107,13 @@ class GripMeasure:
         """(G,) bool: every finger the volume shows meets enough surface, squarely enough."""
         return self._meets(config.min_contact, config.min_alignment)
 
+    def square(self, config: GripConfig = GripConfig()) -> np.ndarray:
+        """(G,) bool: the grasps that pass at the square grip (``config.preferred_alignment``)."""
+        return self._meets(config.min_contact, max(config.min_alignment, config.preferred_alignment))
+
     def kept(self, config: GripConfig = GripConfig()) -> np.ndarray:
-        """(G,) bool: the grasps that pass and, where any grips squarely
-        (``config.preferred_alignment``), only those."""
-        square = self._meets(config.min_contact, max(config.min_alignment, config.preferred_alignment))
+        """(G,) bool: the grasps that pass and, where any grips squarely, only those."""
+        square = self.square(config)
         return square if square.any() else self.passes(config)
 
     def _meets(self, min_contact: float, min_alignment: float) -> np.ndarray:

@@ -86,9 +86,10 @@ class Settings(BaseSettings):
     )
     alternatives: bool = Field(
         default=True,
-        description="when a check drops a grasp, try it again turned about its approach and tilted "
-        "(service/checks.py) and keep the first pose that passes, so that a location the network is "
-        "confident about is not lost to its one orientation",
+        description="when a check drops a grasp, try it again turned about its approach, tilted and stepped "
+        "back (service/checks.py) and keep the pose whose fingers both grip at the square grip "
+        "(VGN_GRIP_PREFERRED_ALIGNMENT) most squarely, so that a location the network is confident about "
+        "is not lost to its one orientation; only where the grip check runs",
     )
     fallback_threshold: float = Field(
         default=0.5,

@@ -94,7 +94,9 @@ def summarize(rounds: list[Mapping[str, Any]], grasps: list[Mapping[str, Any]]) 
         "percent_cleared_ci95": wilson_interval(cleared, placed),
         "outcomes": outcome_counts(grasps),
         "endings": endings,
-        "no_grasp_rate": round(100 * endings["no_grasp"] / len(rounds), 1) if endings else None,
+        "no_grasp_rate": round(100 * endings["no_grasp"] / sum(endings[e] for e in ROUND_ENDINGS), 1)
+        if endings
+        else None,
         "planning_ms": stats(planning),
         "client_planning_ms": stats(client_planning),
         "integration_ms": stats(integration),
