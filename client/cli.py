@@ -8,9 +8,8 @@
     vgn-client view SESSION --out v.html  # save the 3D session viewer (or open it in a browser)
     vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
 
-``--url`` (or ``VGN_URL``) picks the service and ``--api-key`` (or ``VGN_API_KEY``) its key;
-a ``grpc://HOST:PORT`` URL talks gRPC (needs the [grpc] extra) instead of HTTP. Every command
-takes ``--log-level`` (debug, info, warning, error): what the libraries report on stderr.
+``--url`` (or ``VGN_URL``, ``grpc://HOST:PORT`` for gRPC) picks the service and ``--api-key``
+(or ``VGN_API_KEY``) its key; ``--log-level`` sets what the libraries report on stderr.
 """
 
 from __future__ import annotations

@@ -144,7 +144,7 @@ class EmbeddedService:
         return self._log.read().decode(errors="replace")
 
     def stop(self) -> None:
-        """Terminate the child (killing it after 10 s) and close its log; a no-op once stopped."""
+        """Terminate the child (killing it if it outlives a grace period) and close its log; a no-op once stopped."""
         if self._process is None:
             return
         if self._process.poll() is None:

@@ -3,15 +3,11 @@ request about a session to the same replica, over HTTP and gRPC.
 
     python -m client.haproxy --replicas 3 --server 'vgn-{i}.vgn-replicas' --resolvers > haproxy.cfg
 
-Routing hashes the ``X-Session-Id`` header (gRPC: ``x-session-id`` metadata, the same header
-in HTTP/2) on a consistent-hash ring, so every proxy with the same server list sends a session
-to the same replica, and a replica that leaves moves only its own sessions. Requests without
-the header (health, model, the session list) go round robin. The HTTP backend checks each
-replica's ``/readyz``; the gRPC backend (HTTP/2 without TLS, ``proto h2``) follows those checks
-(``track``), since both front ends live and die in one process. A replica that refuses
-connections is marked down at once (``observe layer4``), and a request that could not reach
-it goes to the next replica on the ring (``option redispatch``), where the client rebuilds
-the session (``client.recovery``).
+Routing hashes the ``X-Session-Id`` header (gRPC: ``x-session-id`` metadata) on a consistent-hash
+ring, so every proxy with the same server list agrees and a replica that leaves moves only its
+own sessions; requests without the header go round robin. Both backends follow each replica's
+``/readyz``; a replica that refuses connections is marked down at once and its requests go to
+the next one on the ring, where the client rebuilds the session (``client.recovery``).
 """
 
 from __future__ import annotations

@@ -2,18 +2,12 @@
 must, and how, for the HTTP and gRPC clients alike.
 
 Behind a proxy that routes by session id (docs/fleet.md), a session lives in one replica's
-memory. When that replica dies, the proxy routes the session to another replica, which does
-not know it (404 / NOT_FOUND), or answers for it while it notices (a 502/503/504 of its own,
-or a dropped connection). The client keeps what built the session since its last reset: its
-settings (or the snapshot it was imported from) and the frames it fused, within ``Replay``'s
-bounds. On such an error it opens the session again under the same id, wherever the proxy
-now sends it, replays the frames in order and sends the failed request again: the caller
-sees a slower call, not an error. The rebuilt volume is the one the frames make, so grasps
-are the same.
-
-Beyond the bounds (more frames or bytes since the last reset than ``Replay`` allows) a
-session cannot be rebuilt: its kept frames are dropped and a lost session raises the
-original error, as without recovery, until its next reset.
+memory. When that replica dies, the next one does not know the session (404 / NOT_FOUND) or
+fails while the proxy notices (502/503/504, a dropped connection). The client keeps the
+session's settings and the frames fused since its last reset, within ``Replay``'s bounds; on
+such an error it opens the session again under the same id, replays the frames and retries
+the request, so the caller sees a slower call with the same grasps, not an error. Past the
+bounds a lost session raises the original error until its next reset.
 """
 
 from __future__ import annotations

@@ -82,9 +82,7 @@ class Pose(_Model):
         """Pose of a 4×4 rigid transform; ``ValueError`` unless it is one.
 
         Built without validating the fields again: the checks leave a finite position and a
-        unit quaternion, and every frame upload with a matrix pose pays for this (~0.1 ms of
-        ~0.25 ms with caches cold, as between uploads).
-        """
+        unit quaternion, and every frame upload with a matrix pose pays for this call."""
         return cls.model_construct(**_checked_pose_fields(matrix))
 
     def as_matrix(self) -> np.ndarray:

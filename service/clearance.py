@@ -1,27 +1,15 @@
 """Clearance check: which grasps let the open hand reach them without touching observed geometry.
 
 The executor (``sim_worker/grasping.py``, VGN's protocol) places the hand open at the maximum
-opening 5 cm back along the approach, then moves it straight along the approach (+z of the
-grasp frame) to the grasp pose, orientation fixed. A grasp is *clear* when none of the hand's
-parts, swept along that path, comes near more than ``min_points - 1`` observed surface points.
-Points between the fingers (the closing region) never count: only the hand's own volume does.
+opening 5 cm back along the approach and moves it straight to the grasp pose. A grasp is
+*clear* when none of the hand's parts, swept along that path, comes near more than
+``min_points - 1`` observed surface points; points between the fingers never count.
 
 The hand is the ``franka-v2`` collision model of ``sim_worker/assets/gripper.urdf`` (a test
-compares the two), every part a box in the grasp frame (docs/conventions.md: +z approach,
-y closing axis, origin midway between the finger bases):
-
-- palm: 6 cm (x) by 20 cm (y) by 6 cm (z), its face at z = -4.5 mm;
-- per finger, at joint position q = half the opening (the pads' inner faces at y = ±q):
-  a 22 x 15 x 20 mm base block centred 18.5 mm outside the pad face at z = 6.5 mm, a
-  17.5 x 7 x 23.5 mm web tilted 30° about x, and the 20 x 15.2 x 18.5 mm rubber pad whose tip
-  is at z = 50 mm (the finger depth).
-
-Each swept box is tested exactly (slab test of the segment a point traces in the box's frame
-as the hand moves), for the points inside the bounding box of the whole swept hand.
-
-Geometry: the caller passes surface points, world frame. The service uses the zero crossings
-of the session's coarse TSDF (``SceneVolume.surface_points``): under 1 ms for a 40³ volume,
-where the fine cloud of ``/cloud`` costs tens to hundreds of milliseconds to fuse and extract.
+compares the two; its boxes are in :data:`PALM_HALF` and :data:`FINGER_BOXES`), every part a
+box in the grasp frame (docs/conventions.md), each swept box tested exactly for the points
+inside the swept hand's bounding box. The service passes the zero crossings of the session's
+coarse TSDF (``SceneVolume.surface_points``), far cheaper than the fine cloud of ``/cloud``.
 """
 
 from __future__ import annotations
@@ -63,14 +51,7 @@ class ClearanceConfig:
     along the approach the approach starts; ``contact_tolerance`` (m): contact in the last
     this-many metres of the approach is allowed, since a guarded approach stops there and
     closes only that much short of the grasp pose (often still a success, e.g. fingertips
-    meeting the table).
-
-    Defaults measured on the simulator (seed-1 pile-5 held-out scenes, every grasp of the
-    first attempt of 20 rounds executed with and without the check, 86 grasps, 56 % success):
-    2 mm / 2 points / 5 mm kept 56 grasps at 71 % success and 3 approach contacts (of 17);
-    with no tolerance the check also dropped grasps whose fingertips only touch the table
-    (43 kept, 72 %), with no margin it kept more approach contacts (68 kept, 65 %).
-    """
+    meeting the table). How the defaults were chosen: docs/concepts.md, "The clearance check"."""
 
     margin: float = 0.002
     min_points: int = 2
@@ -89,8 +70,8 @@ class ClearanceConfig:
 def hand_boxes(opening: float = MAX_OPENING, margin: float = 0.0) -> tuple[np.ndarray, ...]:
     """The open hand as boxes in the grasp frame: centres (B, 3), rotations (B, 3, 3) box →
     grasp frame and half extents (B, 3) grown by ``margin``. Palm first, then the left
-    (+y) and right (-y) fingers' base, web and pad. Kept per (opening, margin), read-only:
-    building them costs about 0.1 ms, a fifth of checking the few grasps of a request."""
+    (+y) and right (-y) fingers' base, web and pad. Kept per (opening, margin), read-only,
+    since building them is a fair share of checking the few grasps of a request."""
     half_opening = 0.5 * opening
     centres, rotations, halves = [PALM_CENTRE], [np.eye(3)], [PALM_HALF]
     for side in (1.0, -1.0):

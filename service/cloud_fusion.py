@@ -1,16 +1,13 @@
 """Fusing queued frames into sessions' cloud volumes off the request path.
 
-Open3D holds the GIL for the whole of a fine (120³) integration (~25 ms), so fusing while
-frames stream in or grasps are planned stalls every request of the process, whichever thread
-does it (a grasp request that meets one takes about 1.6x as long). One shared worker therefore
-fuses queued frames only in a lull: no frame has arrived and no planning has run in the process
-for ``idle_s`` (the service wraps planning in :meth:`CloudFusion.planning`), or at once for a
-queue an upload waits on (full). And it spends the CPU only on
-clouds likely to be read: a session whose cloud was read before, or whose queue is past a
-quarter of its bound; the rest wait for a cloud read (most sessions only ask for grasps).
-
-The thread starts on the first frame, ends after ``linger_s`` with nothing queued (a service
-built per test or per request leaves no thread behind) and on ``close``.
+Open3D holds the GIL for the whole of a fine (120³) integration, so fusing while frames
+stream in or grasps are planned stalls every request of the process, whichever thread does
+it. One shared worker therefore fuses queued frames only in a lull: no frame has arrived and
+no planning has run in the process for ``idle_s`` (the service wraps planning in
+:meth:`CloudFusion.planning`), or at once for a queue an upload waits on (full). It fuses
+only clouds likely to be read (read before, or a queue past a quarter of its bound); the
+rest wait for a cloud read. The thread starts on the first frame and ends after
+``linger_s`` with nothing queued, and on ``close``. Figures: docs/design.md.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The planning core: sessions, fusion and grasp planning behind one object.
 
-Front ends (the FastAPI app, a future gRPC server, in-process benchmarks) call this and map
-its ``ServiceError``s to their own codes; nothing here knows about HTTP.
+Front ends (the FastAPI app, the gRPC servicer in ``service.grpc``, in-process benchmarks) call
+this and map its ``ServiceError``s to their own codes; nothing here knows about HTTP or gRPC.
 """
 
 from __future__ import annotations

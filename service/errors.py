@@ -1,4 +1,4 @@
-"""Domain errors of the planning core; front ends (HTTP now, gRPC later) map them to codes."""
+"""Domain errors of the planning core; the HTTP and gRPC front ends map them to their codes."""
 
 from __future__ import annotations
 

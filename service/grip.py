@@ -1,33 +1,15 @@
 """Grip check: will the closing fingers meet the observed surface squarely, on both sides?
 
-VGN scores a grasp from the grid around it, and most of the grasps it is wrong about in
-clutter are not approach collisions (the clearance check catches those) but grasps that close
-on an edge, a corner or a slanted face and slip out while lifting. This check closes the hand
-on the fused surface itself: from each finger's pad, at the maximum opening, rays march along
-the closing axis (the grasp frame's y) towards the other finger until the TSDF crosses zero.
-Where a ray stops, the TSDF gradient there is the surface normal it meets; a pad meets the
-object squarely when that normal points back along the ray (a parallel-jaw grip holds by
-friction within a cone around the closing axis).
-
-Per grasp and finger this gives:
-
-- ``contact``: the share of the pad's rays that meet the surface before the fingers meet;
-- ``alignment``: the mean cosine between the met normals and the finger's closing direction.
-
-A grasp passes when, for *both* fingers, at least ``min_contact`` of the rays meet the surface
-and their mean alignment is at least ``min_alignment`` (:class:`GripConfig`); where some grasps
-pass at ``preferred_alignment`` (a square grip), only those are kept. A finger that
-closes from a side no camera saw (its rays meet unobserved space or the back of a surface
-before any free space) cannot be judged and is left to the network. A volume fused from a
-single frame is not checked at all (:data:`MIN_GRIP_FRAMES`). Rays march through
-the coarse grid the network reads (trilinear reads, one ``map_coordinates`` call for all
-grasps): about 0.4 ms for the two or so grasps a pile look keeps at the 0.8 threshold, about
-3 ms for 40, on a busy 2-core CPU.
-
-Frames and conventions (docs/conventions.md): grasp frame +z approach, y closing axis,
-origin midway between the finger bases; the pads' faces span z = 31.5-50 mm and x = ±10 mm
-(the ``franka-v2`` hand, as in ``service.clearance``). The grid holds (tsdf + 1) / 2 where
-observed, 0 elsewhere, its values at voxel centres ``(index + 0.5) * voxel_size``.
+Most grasps VGN is wrong about in clutter close on an edge, a corner or a slanted face and slip
+out while lifting. This check closes the hand on the fused surface: from each finger's pad,
+rays march along the closing axis through the coarse grid until the TSDF crosses zero, where
+its gradient is the normal the pad meets. Per finger, ``contact`` is the share of rays that
+meet the surface and ``alignment`` the mean cosine between those normals and the closing
+direction; a grasp passes when both fingers reach :class:`GripConfig`'s thresholds, and square
+grips (``preferred_alignment``) are kept over the rest. A finger closing from an unseen side is
+left to the network, and a single-frame volume is not checked (:data:`MIN_GRIP_FRAMES`).
+Frames: docs/conventions.md (the ``franka-v2`` pads, as in ``service.clearance``); figures and
+how the thresholds were chosen: docs/concepts.md, "The grip check".
 """
 
 from __future__ import annotations
@@ -51,7 +33,8 @@ STEP = 0.002
 #: (``benchmarks.grasp_outcomes --views side``: 138 grasps, 43.5 % successful) the grasps it kept
 #: succeeded 35 % of the time and the ones it dropped 54 %.
 MIN_GRIP_FRAMES = 2
-#: Grid value of the surface: (tsdf + 1) / 2 at tsdf = 0.
+#: Grid value of the surface: the grid holds (tsdf + 1) / 2 where observed and 0 elsewhere, its
+#: values at voxel centres ``(index + 0.5) * voxel_size``; the surface is at tsdf = 0.
 SURFACE = 0.5
 
 
@@ -63,19 +46,10 @@ class GripConfig:
     (``preferred_alignment``): when some grasps grip that squarely, only those are kept (at or
     below ``min_alignment`` it changes nothing).
 
-    ``min_alignment`` was chosen on simulated grasps on *training* objects (pile-5 scenes of VGN's
-    pile training objects, seed 11, every grasp of quality >= 0.5 at each of the 154 looks of 33
-    clutter-removal rounds executed from the same state, ``python -m benchmarks.grasp_outcomes``;
-    316 of them turn-averaged, clearance-checked and of quality >= 0.8, 81.3 % of which
-    succeeded): a mean alignment of 0.5 (60 degrees) dropped 33 that succeeded 54.5 % of the time
-    and kept 283 that succeeded 84.5 %; 0.6 dropped 102 that succeeded 70.6 % for 86.4 %.
-    Requiring contact on a third of the rays only drops grasps that meet nothing.
-
-    ``preferred_alignment`` is a preference because a hard 0.7 would leave many looks with no
-    grasp at all; a robot executes one grasp per look, and beside a square grip the others are the
-    likelier to slip. It was chosen the same way, on other rounds than the benchmark's
-    (``report --preferred``; docs/concepts.md, "The grip check", has the figures).
-    """
+    The thresholds were chosen on simulated grasps on *training* objects, never the benchmark's
+    (``python -m benchmarks.grasp_outcomes``); the figures are in docs/concepts.md, "The grip
+    check". ``preferred_alignment`` is a preference, not a threshold, because a hard one would
+    leave many looks with no grasp at all."""
 
     min_contact: float = 1.0 / 3.0
     min_alignment: float = 0.5

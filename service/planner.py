@@ -88,14 +88,14 @@ def resolve_precision(name: str, device: torch.device) -> torch.dtype:
 
 def default_batch_window_ms(device: torch.device) -> float:
     """How long the first request of a batch waits for others: on a GPU a batch costs about
-    what one grid costs, so 2 ms of waiting pays; on a CPU it would only add latency."""
+    what one grid costs, so a short wait pays; on a CPU it would only add latency."""
     return 2.0 if device.type == "cuda" else 0.0
 
 
 def default_lanes(device: torch.device) -> int:
     """How many parts of a batch run side by side: on a CPU, one per group of torch threads
-    the usable cores hold (2 cores, 1 thread: 2 lanes), since a batch on few threads costs
-    what its grids cost one by one and torch releases the GIL; a GPU takes a batch whole."""
+    the usable cores hold, since a batch on few threads costs what its grids cost one by
+    one and torch releases the GIL; a GPU takes a batch whole."""
     return max(1, usable_cores() // torch.get_num_threads()) if device.type == "cpu" else 1
 
 
@@ -120,11 +120,10 @@ HEADS = ("auto", "on-demand", "whole")
 
 
 def resolve_heads(heads: str, device: torch.device) -> str:
-    """``auto``: on demand on a CPU, where the heads' last convolution is about 40 % of the
+    """``auto``: on demand on a CPU, where the heads' last convolution is a large share of the
     network's arithmetic; whole on a GPU, where that convolution costs next to nothing and reading
     a few hundred voxels would move the features to the CPU and gather there, under the
-    interpreter lock that concurrent requests share (on an H200 whole heads made the default
-    request 1.0-1.4 ms faster)."""
+    interpreter lock that concurrent requests share (docs/design.md has the figures)."""
     if heads not in HEADS:
         raise ValueError(f"heads must be one of {HEADS}, got {heads!r}")
     if heads != "auto":

@@ -1,28 +1,14 @@
 """The CPU runtime settings the service chooses for itself, applied before torch loads.
 
-Why: on small or shared machines the network's cost depends more on OpenMP than on the
-network. With two torch threads on a 2-core VM shared with niced background jobs, the same
-forward pass took 60-680 ms depending on ``OMP_WAIT_POLICY`` (libgomp's default spins, then
-sleeps, and a preempted thread stalls the other at every barrier), while one thread took
-the same time on every run. So, unless the operator says otherwise:
-
-* intra-op threads: half the usable cores, at least 1 and at most 8 (1 on a 2-core machine:
-  the other core is left to frame fusion, HTTP and whatever else runs there);
-* ``OMP_WAIT_POLICY=PASSIVE``: threads sleep at barriers instead of spinning against other
-  processes (child processes inherit it, which is what they want too). ``vgn-train`` imports
-  this package as well and so trains with it; ``benchmarks/training_openmp.py`` checks that
-  this does not slow a training step (it made one about 2x faster on the loaded 2-core VM).
-
-* glibc's allocator keeps freed blocks of up to 32 MB for reuse instead of giving each one back
-  to the kernel (:func:`tune_malloc`). By default blocks over 128 kB-32 MB (the threshold moves)
-  are mapped fresh on every allocation and unmapped on free; a turn-averaged grasp request
-  allocates ~10 MB of network outputs in several threads, and paying page faults for all of it
-  took its planning in the server from 17.8 to 22.1 ms p50 (30 requests each way, 2-core VM).
-
-libgomp reads its environment once, when torch's import loads it, so
-:func:`prepare_environment` runs from ``service/__init__.py``: ``uvicorn service.app:app``
-and the client's embedded service (a child process running the same command) import the
-package before anything imports torch. Variables already set are never overridden.
+On small or shared machines the network's cost depends more on OpenMP and the allocator than
+on the network, so unless the operator says otherwise (variables already set are never
+overridden) the server gets: half the usable cores as intra-op threads, 1 to 8 (the rest is
+left to fusion and HTTP); ``OMP_WAIT_POLICY=PASSIVE``, so threads sleep at barriers instead of
+spinning against other processes and a preempted thread does not stall the rest (children
+inherit it); and glibc's allocator keeping freed blocks of up to 32 MB (:func:`tune_malloc`),
+so a request's network outputs do not pay page faults on every allocation. libgomp reads its
+environment once, when torch loads it, so :func:`prepare_environment` runs from
+``service/__init__.py``, before anything imports torch. Figures: docs/design.md.
 """
 
 from __future__ import annotations

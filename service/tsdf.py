@@ -28,10 +28,9 @@ def _pinhole(intrinsics: Intrinsics) -> o3d.camera.PinholeCameraIntrinsic:
 class _FrameBuffer:
     """A reusable Open3D RGBD image of one size, filled in place.
 
-    Building an ``RGBDImage`` per frame costs ~4 ms for 640×480 (mostly Open3D's copies);
-    writing into a cached one costs ~0.1 ms, and the fused result is identical. Open3D
-    wants a colour image beside the depth even for a colourless volume.
-    """
+    Building an ``RGBDImage`` per frame is mostly Open3D's copies; writing into a cached one
+    is far cheaper, and the fused result is identical. Open3D wants a colour image beside
+    the depth even for a colourless volume."""
 
     def __init__(self, height: int, width: int) -> None:
         self.shape = (height, width)
@@ -86,8 +85,7 @@ class TSDFVolume:
         every voxel the frame updates turns that into a moving average which follows a changing
         scene, while what the frame does not see (out of view, or hidden behind the robot's own
         hand) keeps its evidence. The frame is fused into a scratch volume to learn which voxels
-        it updates and what it says there, and the two are combined: about 2 ms for 40³.
-        """
+        it updates and what it says there, and the two are combined."""
         if self._scratch is None:
             self._scratch = TSDFVolume(self.size, self.resolution)
             self._empty = o3d.utility.Vector2dVector(np.zeros((self.resolution**3, 2)))
@@ -130,7 +128,7 @@ class TSDFVolume:
 
     def surface_points(self) -> np.ndarray:
         """(M, 3) points where the fused TSDF crosses zero, workspace frame: the observed
-        surface at sub-voxel precision, without normals (under 1 ms for 40³)."""
+        surface at sub-voxel precision, without normals (cheap enough for every request)."""
         return np.asarray(self._volume.extract_point_cloud().points, dtype=np.float64).reshape(-1, 3)
 
     def state(self) -> np.ndarray:
@@ -170,11 +168,8 @@ def compact_depth(depth: np.ndarray) -> np.ndarray:
     2.5 mm voxels (the cloud moves by well under a voxel, see the tests); a value past
     float16's range becomes inf, which fusion drops like any depth beyond ``max_depth``.
     Every pixel is kept: subsampling where two pixels fit in a voxel halved the memory
-    again but moved edges enough to change the antipodal planner's grasps.
-
-    The cast runs in torch: numpy converts to float16 one value at a time (~0.55 ms for
-    640×480), torch with the CPU's conversion instructions (~0.04 ms), with the same result.
-    """
+    again but moved edges enough to change the antipodal planner's grasps. The cast runs in
+    torch, which uses the CPU's conversion instructions where numpy converts value by value."""
     return torch.from_numpy(np.ascontiguousarray(depth, dtype=np.float32)).to(torch.float16).numpy()
 
 
@@ -182,20 +177,15 @@ class SceneVolume:
     """What a session fuses: the coarse grid the network reads, and a finer volume for the
     point cloud, both in the workspace whose corner sits at ``workspace_pose`` in the world.
 
-    The fine volume (120³) costs ~15-25x the coarse one to integrate (~25 ms a frame) and
-    only cloud readers need it, so an upload fuses the coarse volume and queues a compact copy
-    of the frame (``compact_depth``), never fusing the fine one. The shared ``CloudFusion``
-    worker fuses the queue in lulls between uploads once the session's cloud has been read or
-    its queue is a quarter full; a cloud read fuses what is left. Memory stays bounded: at
-    ``max_pending`` queued frames, or with the process's queues over their byte budget, an
-    upload waits for the worker to make room. No frame is dropped.
+    The fine volume (120³) costs many times the coarse one to integrate and only cloud readers
+    need it, so an upload fuses the coarse volume and queues a compact copy of the frame
+    (``compact_depth``) for the shared ``CloudFusion`` worker (docs/design.md); no frame is dropped.
 
     Locks: the caller holds the session's lock for ``integrate``, ``reset``, ``grid`` and
     ``cloud``; the worker takes none of the session's. ``_lock`` guards the queue and which
     fine volume is current (short holds); ``_fusing`` is held while integrating into the fine
-    volume, so that a cloud read waits for the worker's frame in flight. A reset swaps in a
-    new queue and volume: a frame the worker was fusing lands in the discarded volume.
-    """
+    volume, so a cloud read waits for the worker's frame in flight. A reset swaps in a new
+    queue and volume: a frame the worker was fusing lands in the discarded volume."""
 
     def __init__(self, size: float, resolution: int, workspace_pose: np.ndarray, cloud_resolution: int,
                  max_pending: int = 512, fusion: CloudFusion | None = None,

@@ -1,19 +1,12 @@
 """Simulated depth camera: PyBullet renders from pinhole intrinsics and camera poses.
 
-Conventions (docs/conventions.md): metres and radians (angles in degrees only where a name ends in
-``_deg``); a camera pose is the 4×4 camera→world transform of the OpenCV optical frame
-(x right, y down, z forward); depth images are (H, W) float32 holding z in that frame, in
-metres, with 0 where there is no reading. Pixel (row v, column u) is the ray through the
-image point ``(u, v)`` with the integer coordinates at pixel centres (OpenCV's convention),
-so ``u = fx·x/z + cx`` lands on column ``round(u)``.
-
-The OpenGL side: PyBullet wants a view matrix (world → OpenGL camera, which looks along -z
-with y up, i.e. the OpenCV frame rotated π about x) and a projection matrix, both as 16
-numbers in column-major order. Both are built here from the pose and the intrinsics, so the
-rendered images agree with what the service's TSDF integration assumes.
-
-Views follow VGN (docs/conventions.md): cameras on a sphere about a centre, ``tilt`` measured from
-the vertical, ``azimuth`` about world z from +x.
+Conventions (docs/conventions.md): metres and radians (degrees only where a name ends in
+``_deg``); a camera pose is the 4×4 camera→world transform of the OpenCV optical frame;
+depth images are (H, W) float32 z in metres, 0 where there is no reading, with integer pixel
+coordinates at pixel centres (OpenCV's convention). PyBullet's OpenGL view and projection
+matrices are built here from the pose and the intrinsics, so the rendered images agree with
+what the service's TSDF integration assumes. Views follow VGN: cameras on a sphere about a
+centre, ``tilt`` measured from the vertical, ``azimuth`` about world z from +x.
 """
 
 from __future__ import annotations
@@ -127,14 +120,12 @@ class DepthNoise:
     """Depth-sensor noise as in Dex-Net 2.0 and GIGA's ``apply_dex_noise``.
 
     - Multiplicative: the whole image is scaled by one draw of ``Gamma(k, 1/k)``
-      (``gamma_shape`` = k; mean 1, standard deviation 1/√k ≈ 3 % for k = 1000), a
-      per-frame scale error.
+      (``gamma_shape`` = k; mean 1, standard deviation 1/√k), a per-frame scale error.
     - Additive: with probability ``field_probability``, a smooth Gaussian field with
       standard deviation ``field_sigma`` metres, drawn on a coarse grid with one sample per
       ``field_cell_px`` pixels and upsampled bilinearly (GIGA: σ 5 mm, 4 px cells, p 0.5).
 
-    Pixels without a reading (0, NaN, inf) stay 0.
-    """
+    Pixels without a reading (0, NaN, inf) stay 0."""
 
     gamma_shape: float = 1000.0
     field_sigma: float = 0.005

@@ -1,24 +1,15 @@
 """Closing the visual loop in the clutter benchmark: watching while approaching, and scanning
-while planning.
+while planning (docs/closed-loop.md).
 
-``ApproachWatch`` is the closed loop of ``clear-scene --closed-loop``: while the hand moves in,
-the fixed cameras keep looking at 10 Hz, and each look is compared with what the cameras saw
-when the grasp was planned, around the grasp (the hand filtered out, as a robot filters its own
-body out of its depth). When the scene there has changed, or the hand touched something on the
-way in, the hand stops before closing and withdraws, and the robot looks again with the hand
-out of view and plans anew.
+``ApproachWatch`` (``clear-scene --closed-loop``): while the hand moves in, the fixed cameras
+keep looking, and each look is compared, around the grasp and with the hand filtered out,
+with what they saw when the grasp was planned. When the scene there changed, or the hand
+touched something, the hand withdraws before closing and the robot looks and plans anew.
 
-Asking the service whether the aimed-at grasp still stands, on frames fused while the hand is
-in view, was tried first and given up: the hand hides the object from every view looking down
-at it, and what it leaves visible shifts the network's grasps by one to three voxels (up to
-22 mm and 40 degrees on untouched pile scenes), about what a disturbance does.
-
-``WristScan`` is ``clear-scene --scan wrist``: a wrist camera circles the scene while closing in,
-each frame is fused and planned on as it arrives, and the robot commits as soon as the best
-grasp has stayed the same grasp for ``STABLE_PLANS`` plans, or at the arc's last frame. The
-frames lie a third of a turn apart because a grasp needs its object seen from more than one
-side: three frames spread around the scene plan about as well as the six fixed views, while a
-straight approach from one side planned worse with more frames (docs/closed-loop.md).
+``WristScan`` (``clear-scene --scan wrist``): a wrist camera circles the scene while closing in,
+each frame is fused and planned on, and the robot commits once the best grasp has stayed the
+same for ``STABLE_PLANS`` plans, or at the arc's last frame. The frames lie a third of a turn
+apart because a grasp needs its object seen from more than one side.
 """
 
 from __future__ import annotations

@@ -1,17 +1,12 @@
 """Labelled grasp data through the service (VGN's data generation, docs/conventions.md).
 
 Per scene: build a pile or packed scene, render 1-6 random views, post them to a session,
-read the fused grid (to skip scenes where nothing was observed) and the point cloud with
-normals back from the service, and label 120 grasp points by trying 6 yaws each in simulation. The output is VGN's raw layout (vgn_data.dataset).
-
-Random surface points rarely land where the network is confidently wrong, and those are the grasps a
-plain request executes. ``answer_grasps`` also labels up to that many of the service's own plain
-answers per scene (its network alone, no turn averaging or checks), each tried once as answered:
-its mistakes become negatives exactly where it makes them.
-
-A share of scenes can be observed the way a real sensor sees them (``noise_fraction``: Dex-Net
-depth noise; ``side_view_fraction``: one view from the side instead of 1-6 from above), so a
-model trained on the data survives them. Which scenes do is drawn from the seed alone.
+read the fused grid and the point cloud with normals back, and label 120 grasp points by
+trying 6 yaws each in simulation; the output is VGN's raw layout (vgn_data.dataset).
+``answer_grasps`` also labels the service's own plain answers, so the network's mistakes
+become negatives exactly where it makes them. A share of scenes, drawn from the seed alone,
+can be observed as a real sensor sees them (``noise_fraction``: Dex-Net depth noise;
+``side_view_fraction``: one view from the side), so a model trained on the data survives them.
 """
 
 from __future__ import annotations

@@ -102,17 +102,12 @@ def execute_grasp(
     Spawn open at the pre-grasp 5 cm back along the approach (contact there fails), move
     straight in, stopping on contact (a failure unless ``allow_contact``), close, lift 10 cm,
     and succeed when something is still between the fingers. The grasped object is removed
-    when ``remove_grasped``; the gripper is parked afterwards either way.
+    when ``remove_grasped``; the gripper is parked afterwards either way. ``fast`` (labelling,
+    with ``allow_contact=False``) gives the same outcomes for less physics.
 
-    ``fast`` (for labelling data, with ``allow_contact=False``) gives the same outcomes for
-    less physics: the approach is swept kinematically (any contact fails anyway), and a
-    trial ends as soon as the fingers have closed on nothing.
-
-    ``on_waypoint(n, count)`` runs after each 2 mm step of the approach (a disturbance, a closed
-    loop's look at the scene); when it returns True the hand stops there, open, and the trial
-    ends ``INTERRUPTED``, which is no grasp attempt. ``on_contact()`` runs when the approach
-    stopped on contact; when it returns True the hand does not close and the trial ends so too.
-    """
+    ``on_waypoint(n, count)`` runs after each 2 mm step of the approach; when it returns True the
+    hand stops there, open, and the trial ends ``INTERRUPTED`` (no grasp attempt).
+    ``on_contact()`` runs when the approach stopped on contact; True ends the trial so too."""
     if fast and allow_contact:
         raise ValueError("fast execution sweeps the approach kinematically: it needs allow_contact=False")
     started, first_step = time.perf_counter(), world.sim_time

@@ -52,7 +52,7 @@ def round_endings(rounds: Iterable[Mapping[str, Any]]) -> dict[str, int] | None:
 
 
 def wilson_interval(successes: int, trials: int) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion, in percent (robust at 0 % and 100 %)."""
+    """95 % Wilson score interval of a proportion, in percent (robust when all or none succeed)."""
     if trials == 0:
         return (0.0, 0.0)
     p = successes / trials

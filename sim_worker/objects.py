@@ -1,18 +1,13 @@
 """Object sets for the simulated scenes: what can be dropped on the table (docs/conventions.md).
 
 An :class:`ObjectSet` is a list of URDFs (one rigid object each) plus the scale that the
-scene generators multiply their random scale by. Three sources:
-
-- :func:`blocks_set`: geometric primitives generated here (no mesh files ship with the
-  repository); VGN's "blocks" scenes scale blocks by 1.67, and so do we.
-- :func:`pybullet_data_set`: the rigid objects of ``pybullet_data`` that fit the gripper,
-  vetted once (loaded, measured) and cached.
-- :func:`urdf_folder_set`: any folder of URDFs in the VGN layout (``--objects DIR``), e.g.
-  the object sets of the VGN data release.
+scene generators multiply their random scale by. Three sources: :func:`blocks_set`
+(geometric primitives generated here, scaled by 1.67 as VGN's "blocks" scenes do),
+:func:`pybullet_data_set` (the rigid objects of ``pybullet_data`` that fit the gripper,
+vetted once and cached) and :func:`urdf_folder_set` (any folder of URDFs in the VGN layout).
 
 All lengths are metres, masses kilograms. Object frames are the URDF's link frame; for the
-generated blocks it is the centre of mass, with z the "up" axis of the upright pose used
-by packed scenes.
+generated blocks it is the centre of mass, with z up in the upright pose of packed scenes.
 """
 
 from __future__ import annotations
@@ -410,8 +405,7 @@ def vet_pybullet_data(data_path: Path | None = None) -> list[VettedObject]:
     Kept: single-link bodies with a collision shape, 0 < mass ≤ ``MAX_MASS`` kg, whose
     smallest horizontal AABB extent is ≤ ``MAX_GRASP_EXTENT`` and whose extents all lie in
     [``MIN_EXTENT``, ``MAX_EXTENT``] at the kept scale. Named objects that are too wide are
-    shrunk to ``RESCALE_TARGET``. Takes a few seconds (about 4 ms per URDF).
-    """
+    shrunk to ``RESCALE_TARGET``. Takes a few seconds, hence the cache."""
     import pybullet
     import pybullet_data
 

@@ -1,28 +1,14 @@
 """Depth-sensor models beyond Dex-Net's: a structured-light / active-stereo camera, and camera
 pose error.
 
-A simulated depth image is perfect; a real one is not, and a grasp planner trained and judged on
-perfect depth overstates what it does on a robot. The structured-light model reproduces the
-errors that matter for grasping, each from the literature on Kinect-type and RealSense-type
-sensors (docs/sensors.md lists the sources and parameters):
-
-- **Axial noise** growing with the square of the distance: σ(z) = a + b (z − z₀)² metres
-  (Nguyen, Izadi and Lovell, 3DIMPVT 2012: a = 1.2 mm, b = 1.9 mm/m², z₀ = 0.4 m; Khoshelham
-  and Elberink, Sensors 2012: the random error grows quadratically).
-- **Steep surfaces**: readings thin out as the surface turns away from the camera; a pixel
-  whose surface normal is more than ``steep_start_deg`` from the viewing ray is lost with a
-  probability rising linearly to 1 at ``steep_end_deg`` (Nguyen et al.: noise grows sharply
-  beyond about 70°).
-- **Shadows**: the projector sits ``baseline`` metres beside the camera (along image +x); a
-  point it cannot see casts no pattern and gives no depth (the occlusion band on one side of
-  every object that Kinect and RealSense images show).
-- **Edges and flying pixels**: at a depth discontinuity (neighbours more than
-  ``edge_jump`` metres apart) a pixel is lost with probability ``edge_dropout``, or, with
-  probability ``flying_pixel``, takes a depth between the two surfaces (a "flying pixel").
-- **Quantisation** to ``quantum`` metres (1 mm: RealSense's default depth unit).
-
-Pixels with no reading are 0, as everywhere in the simulator. All draws come from the ``rng``
-passed in, so an observation is reproducible.
+A simulated depth image is perfect; a real one is not, and a grasp planner trained and judged
+on perfect depth overstates what it does on a robot. The structured-light model reproduces the
+errors that matter for grasping, each from the literature on Kinect- and RealSense-type
+sensors: axial noise growing with the square of the distance, readings lost on steep
+surfaces, projector shadows, dropped and flying pixels at depth edges, and quantisation.
+docs/sensors.md lists the models, their parameters and sources. Pixels with no reading are 0,
+as everywhere in the simulator; all draws come from the ``rng`` passed in, so an observation
+is reproducible.
 """
 
 from __future__ import annotations

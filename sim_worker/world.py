@@ -321,7 +321,8 @@ class World:
         return True
 
     def wait_for_rest(self) -> bool:
-        """Step until every object is at rest (checked every 60 steps, at most 2 s)."""
+        """Step until every object is at rest (checked every ``rest_check_steps`` steps, for at
+        most ``rest_timeout`` seconds)."""
         steps = int(round(self.config.rest_timeout / self.config.timestep))
         for _ in range(0, steps, self.config.rest_check_steps):
             self.step(self.config.rest_check_steps)

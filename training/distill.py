@@ -1,28 +1,14 @@
 """Self-distillation of turn averaging: a trained model's turn-averaged output as dense soft targets.
 
 Turn averaging (``service.vgn.turns``) makes a model's grasps markedly better, at four forward
-passes a request. Training a network to give that averaged answer in one pass moves the gain
-into the weights. The teacher is a trained model run on each training scene turned by 0°, 90°,
-180° and 270°; its averaged quality, orientation and (unturned) width become soft labels at every
-voxel of the scene where detection may place a grasp (``grasp_region``), not only at the ~100
-voxels with trial labels. The soft labels are moved with the training augmentation like trial
-labels. The averaged quality is the same whichever way the scene is turned; the averaged
-orientation nearly so (it is aligned to the unturned grid's prediction, which matters where the
-four turns disagree).
-
-With ``checks`` the soft labels also carry the service's default checks: where the teacher's
-grasp fails the clearance check (the open hand would touch the observed surface on its way in,
-``service.clearance``) or the grip check (the closing fingers would not meet the surface squarely,
-``service.grip``), its quality target is 0, as the service would drop that grasp. Each grasp is
-judged alone: the grip check's preference for square grips, which depends on the other grasps a
-request returns, is not taught. A network trained on them can then give in one plain pass what
-the default request gets from the checks.
-Both checks read only the grid (the clearance check its TSDF zero crossings,
-``service.grid_surface``), so they run on any training scene.
-
-Working the targets out takes minutes on a large dataset (10 on a CPU for 11,000 scenes), so a
-run saves them beside its checkpoint and a resume reads them back when nothing they depend on
-changed (:func:`teaching_key`).
+passes a request; training a network to give that answer in one pass moves the gain into the
+weights. The teacher is a trained model run on each training scene turned four ways; its
+averaged quality, orientation and width become soft labels at every voxel where detection may
+place a grasp (``grasp_region``), moved with the training augmentation like trial labels. With
+``checks`` a grasp that fails the service's clearance or grip check gets quality 0, as the
+service would drop it (each grasp judged alone; both checks read only the grid). Working the
+targets out takes long on a large dataset, so a run saves them beside its checkpoint and a
+resume reads them back while nothing they depend on changed (:func:`teaching_key`).
 """
 
 from __future__ import annotations

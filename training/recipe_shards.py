@@ -1,23 +1,9 @@
 """Training data as scene recipes: compact, append-only shards with a manifest (format 2).
 
-A shard, ``shards/<source>-r<NNNN>.npz.xz``, is an uncompressed ``.npz`` inside an xz stream:
-
-    scene_ids       (S,)      str     scene ids (``s<seed>-<index>``)
-    side_view       (S,)      bool    the original observation was one side view
-    renderer        (S,)      str     the renderer that drew it: egl or tiny
-    noisy           (S,)      bool    the original observation carried depth noise
-    noise_state     (S, 6)    uint64  PCG64 state the original noise was drawn from (0 when clean)
-    grid_digest     (S, 16)   uint8   digest of the original observation's quantised grid
-    object_refs     (K,)      str     object files used by the shard (``root:path``)
-    object_urdf_sha256, object_mesh_sha256 (K,) str   their hashes
-    object_scene    (O,)      int32   scene row of each placed object
-    object_file     (O,)      int32   row of ``object_refs``
-    object_scale    (O,)      float64 uniform scale it was loaded with
-    object_pose     (O, 7)    float64 settled base pose, world: x, y, z, qx, qy, qz, qw
-    view_scene      (V,)      int32   scene row of each original camera
-    view_pose       (V, 7)    float64 camera → world (OpenCV optical frame)
-    grasp_scene     (G,)      int32   scene row of each label
-    grasps          (G, 9)    float16 qx, qy, qz, qw, x, y, z, width, label (workspace frame)
+A shard, ``shards/<source>-r<NNNN>.npz.xz``, is an uncompressed ``.npz`` inside an xz stream
+holding, per scene, its ids, how it was originally observed (side view, renderer, depth-noise
+state, the grid's digest), its placed objects (file, scale, settled pose), its original
+cameras and its grasp labels; data/README.md lists every array with its shape and type.
 
 Shards are never rewritten: new scenes go into new shards, and the manifest (written
 atomically) lists each with its sha256. Data of another hand, grid or world is refused.

@@ -1,22 +1,13 @@
 """Training data as it is kept in the repository: packed, append-only shards with a manifest.
 
-Raw datasets (depth images, see ``vgn_data.dataset``) are far too large to keep, and they do
-not survive from one machine to the next. What training needs of a scene is its fused network
-input and its labels, so a shard holds, for a few hundred to a thousand scenes:
-
-    scene_ids    (S,)        scene ids, as in the raw dataset
-    grids        (S, N, N, N) uint8: round(255 · grid), the network input quantised
-                             (|error| ≤ 1/510 ≈ 0.002; 0 stays exactly 0, "unobserved")
-    grasp_scene  (G,)        int32 index into scene_ids for each label
-    grasps       (G, 9)      float16 qx, qy, qz, qw, x, y, z, width, label (metres, workspace
-                             frame; float16 keeps positions to 0.25 mm, a 30th of a voxel):
-                             every label, unbalanced, as generated
-
-A shard is that ``.npz`` (uncompressed) inside an xz (LZMA) stream: about a quarter smaller
-than the ``.npz``'s own deflate on these grids. ``manifest.json`` lists the shards (file, sha256, counts) and, per source, the generator's
-settings and the hand that made the labels. Shards are never rewritten: packing more scenes
-adds new shards and a new manifest (both written atomically), and data made by another hand
-or under other generator settings is refused rather than mixed.
+Raw datasets (depth images, ``vgn_data.dataset``) are too large to keep and do not survive from
+one machine to the next. What training needs of a scene is its fused network input and its
+labels, so a shard holds, for a few hundred to a thousand scenes, ``scene_ids``, ``grids``
+(uint8 ``round(255 · grid)``: 0 stays exactly 0, "unobserved"), ``grasp_scene`` and every
+label as generated in ``grasps`` (float16, workspace frame), as an uncompressed ``.npz`` in an
+xz stream. ``manifest.json`` lists the shards and, per source, the generator's settings and
+hand. Shards are never rewritten, and data made by another hand or under other generator
+settings is refused rather than mixed.
 """
 
 from __future__ import annotations

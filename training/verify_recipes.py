@@ -1,16 +1,12 @@
 """``vgn-data verify``: rebuild scenes from their recipes and check that they are the scenes that
 were labelled.
 
-Each recipe records the digest of the grid its labels were made on. A scene passes when its
-rebuilt original observation (objects placed at their poses, the original cameras and depth
-noise, fused as for training) has that digest. Where the grid shards a recipe was converted
-from are at hand (``--grids``, or the repository's history), the rebuilt grid is also compared
-voxel by voxel, which gives the largest difference of a mismatch.
-
-A scene that holds one object file at two scales and was drawn with EGL before ``World`` loaded
-such copies apart was drawn with every copy at one scale (PyBullet's EGL renderer caches a mesh
-by its path, not its scale; data/README.md). Its rebuild, each copy at its own scale, differs
-from the digest then: verify says so where drawing the scene as the defect did gives the digest.
+Each recipe records the digest of the grid its labels were made on; a scene passes when its
+rebuilt original observation has that digest. Where the grid shards a recipe came from are at
+hand (``--grids``, or the repository's history), the rebuilt grid is also compared voxel by
+voxel. Scenes drawn with EGL before ``World`` loaded one object file's copies at their own
+scales (PyBullet's EGL renderer caches a mesh by path, not scale; data/README.md) differ from
+their digest; verify says so where drawing the scene as the defect did gives the digest.
 """
 
 from __future__ import annotations

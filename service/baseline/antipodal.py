@@ -1,30 +1,12 @@
 """A geometric 6-DOF antipodal grasp planner on the fused point cloud (GPD-style sampling).
 
 Candidates are sampled on the world-frame cloud with outward normals (``SceneVolume.cloud``):
-
-1. ``seeds`` surface points whose normal is not pointing down (n_z > -0.1) are drawn with a
-   seeded generator, so the same cloud always gives the same grasps.
-2. The closing axis y is the seed's normal, so the seed lies on the +y jaw. ``approaches``
-   approach directions z are spread evenly around y, starting from the one closest to
-   straight down; x = y × z (grasp frame: docs/conventions.md).
-3. For each of a few depths (fingertips 5–45 mm past the seed along z) the points in the
-   closing region (|x| <= 1 cm, 0 <= z <= 5 cm, within the 8 cm opening towards -y) are
-   collected. With at least ``min_points`` of them, the closed width is their y-extent + 2 mm
-   (reject above 0.08 m) and the hand is centred on them along y.
-4. Antipodal test: of the points within 3 mm of each jaw, at least ``min_cone_fraction``
-   must have normals within ``friction_angle`` of the jaw's outward direction (+y, -y).
-5. Collision test against the cloud (the table is part of it): no point may lie in either
-   finger (12 mm thick along y, 2 cm wide along x, 5 cm long) or in the palm box
-   (0.04 x 0.20 x 0.06 m behind the finger bases), and no corner of the hand may come
-   within 5 mm of the lowest cloud point. Of the valid depths the deepest is kept.
-
-Score, in [0, 1]: ``antipodality * (1 - 0.05 * width / 0.08) * (0.9 + 0.1 * downness)`` where
-antipodality is the mean |n · y| of the jaw points (1 = both contacts exactly opposed) and
-downness = max(0, -approach_z) (1 = straight down). A clean antipodal top-down grasp scores
-about 0.93-0.97, a side grasp ~0.1 less; the scores are geometric, not success probabilities.
-
-Non-maximum suppression then drops any grasp within 1 cm and 20° (a π turn about the
-approach axis being the same grasp) of a better one.
+seeded surface points give the closing axis (their normal), approach directions are spread
+around it, and each candidate must hold enough points between the jaws, pass an antipodal
+test on the jaw points' normals and leave the fingers, the palm and the table clear (the steps
+and their constants are in the comment below). The same cloud always gives the same grasps.
+Scores are geometric, in [0, 1], not success probabilities; non-maximum suppression keeps the
+best of grasps within 1 cm and 20° of each other. Frames: docs/conventions.md.
 """
 
 from __future__ import annotations
@@ -37,6 +19,27 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
+
+# The steps, per seed:
+# 1. ``seeds`` surface points whose normal is not pointing down (n_z > -0.1) are drawn with a
+#    seeded generator.
+# 2. The closing axis y is the seed's normal, so the seed lies on the +y jaw. ``approaches``
+#    approach directions z are spread evenly around y, starting from the one closest to straight
+#    down; x = y × z.
+# 3. For each of a few depths (fingertips 5–45 mm past the seed along z) the points in the closing
+#    region (|x| <= 1 cm, 0 <= z <= 5 cm, within the 8 cm opening towards -y) are collected. With at
+#    least ``min_points`` of them, the closed width is their y-extent + 2 mm (reject above 0.08 m)
+#    and the hand is centred on them along y.
+# 4. Antipodal test: of the points within 3 mm of each jaw, at least ``min_cone_fraction`` must have
+#    normals within ``friction_angle`` of the jaw's outward direction (+y, -y).
+# 5. Collision test against the cloud (the table is part of it): no point may lie in either finger
+#    (12 mm thick along y, 2 cm wide along x, 5 cm long) or in the palm box (0.04 x 0.20 x 0.06 m
+#    behind the finger bases), and no corner of the hand may come within 5 mm of the lowest cloud
+#    point. Of the valid depths the deepest is kept.
+# Score: ``antipodality * (1 - 0.05 * width / 0.08) * (0.9 + 0.1 * downness)``, antipodality being the
+# mean |n · y| of the jaw points (1: both contacts exactly opposed) and downness max(0, -approach_z)
+# (1: straight down); a clean top-down antipodal grasp scores about 0.93-0.97, a side grasp ~0.1
+# less. Non-maximum suppression counts a π turn about the approach axis as the same grasp.
 
 MAX_OPENING = 0.08
 FINGER_DEPTH = 0.05

@@ -2,16 +2,11 @@
 grasp of the reference's top ``k`` must have a counterpart in the candidate's list at most
 one voxel away, turned by at most a few degrees and with nearly the same quality.
 
-Ranks may swap between grasps whose qualities differ by less than the quality tolerance, so
-a counterpart is looked for among all the candidate's grasps, and the candidate's top ``k``
-is checked against the reference's list the same way (both directions).
-
-Where two neighbouring voxels nearly tie, non-maximum suppression may keep one in the
-reference and the other in the candidate: their positions are a voxel apart and their
-qualities agree, but their orientations are those of two different voxels. With
-``neighbour_swaps`` such a pair is excused; the caller must then check that the two networks'
-outputs agree voxel by voxel (:func:`voxelwise_disagreements`), which is what makes the
-swap a tie and not an error.
+Ranks may swap between near-equal qualities, so counterparts are looked for in the whole
+list, in both directions. Where two neighbouring voxels nearly tie, non-maximum suppression
+may keep one in the reference and the other in the candidate; with ``neighbour_swaps`` such
+a pair is excused, and the caller must then check that the two networks' outputs agree voxel
+by voxel (:func:`voxelwise_disagreements`), which makes the swap a tie and not an error.
 """
 
 from __future__ import annotations

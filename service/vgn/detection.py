@@ -119,7 +119,7 @@ def grasp_region(grid: np.ndarray, config: DetectionConfig = DetectionConfig()) 
     ``surface_dilation`` 6-connected steps that never enter the inside of objects.
 
     The same as ``ndimage.binary_dilation(outside, iterations=k, mask=~inside)`` (tested),
-    done with shifted slices: 8x faster on a 40³ grid."""
+    done with shifted slices, which are much faster on the grids the network reads."""
     region = grid > _SURFACE
     allowed = ~((grid > _INSIDE_LOW) & (grid < _SURFACE))
     for _ in range(config.surface_dilation):

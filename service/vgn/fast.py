@@ -1,20 +1,15 @@
 """An inference-only form of VGN, derived from its weights at load, that computes the same
 function with about a quarter of the arithmetic.
 
-Why it is exact: in VGN's decoder every convolution after the first reads a ×2 *nearest*
-upsampled tensor, and so do the three 5³ output heads. A convolution over a nearest-upsampled
-input equals, for each of the 8 output parities, a 3³ convolution over the low-resolution
-input whose taps are sums of the original taps ("polyphase" form); zero padding maps onto
-zero padding. Stacking the 8 parities as output channels and interleaving them afterwards
-(a 3-D pixel shuffle) gives the upsampled result without ever convolving at the high
-resolution. The three heads are also fused into one 6-channel convolution. The first
-convolution (one input channel, 5³, stride 2) runs the other way round: the grid's 8 voxel
-parities become 8 input channels of a 3³ convolution at half the resolution ("space to
-depth"), which oneDNN computes 3x faster than a convolution over a single channel. Only
-rounding differs from :class:`service.vgn.network.VGN`.
-
-Optionally the convolutions run in bfloat16 on CPUs with native bf16 support (AVX512-BF16 or
-AMX), with inputs and outputs kept in float32.
+Why it is exact: VGN's decoder convolutions after the first, and its three 5³ heads, read a ×2
+*nearest* upsampled tensor. Such a convolution equals, for each of the 8 output parities, a 3³
+convolution over the low-resolution input whose taps are sums of the original taps
+("polyphase" form); stacking the parities as channels and interleaving them afterwards gives
+the upsampled result without convolving at the high resolution. The heads are fused into one
+6-channel convolution, and the first convolution runs over the grid's 8 voxel parities as
+channels ("space to depth"), which oneDNN handles better than a single channel. Only rounding
+differs from :class:`service.vgn.network.VGN`. On CPUs with native bf16 support the
+convolutions may run in bfloat16, inputs and outputs in float32 (docs/design.md).
 """
 
 from __future__ import annotations

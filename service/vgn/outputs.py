@@ -44,10 +44,9 @@ class HeadsOnDemand:
     """One grid's rotation and width, computed from its decoder features where they are read.
 
     Why: detection reads quality everywhere but width only where quality passes the threshold
-    and orientation only where a grasp may be returned, a few hundred of 64,000 voxels. For two
-    40³ grids (bfloat16, one thread) the fused head's convolution took 3.3 ms against 1.3 ms for
-    quality alone, and activating and interleaving all six channels another 3.1 ms; these heads
-    at the voxels detection reads take 0.16-0.39 ms a grid."""
+    and orientation only where a grasp may be returned, a few hundred of 64,000 voxels, so the
+    whole heads' convolution and the activation of all six channels would mostly go unread
+    (figures: docs/performance.md)."""
 
     def __init__(self, network: FastVGN, features: torch.Tensor) -> None:
         self._network = network

@@ -131,7 +131,7 @@ def _aligned_back(turned: np.ndarray, reference: np.ndarray, quarter_turns: int)
     """Quaternions (4, ...) of the grid turned by ``quarter_turns``, already read at the
     reference's positions (zeros where off the grid, which then add nothing), turned back about
     z and put in the form (sign, and π about the approach) nearest ``reference``. The two
-    quaternion products are written out in numpy (3x faster here than the training's torch
+    quaternion products are written out in numpy (faster here than the training's torch
     helpers in ``training.quaternions``, which the tests check them against)."""
     x, y, z, w = turned
     # Turned back: about_z(-k π/2) ⊗ q, written out (the rotation has only z and w parts).
