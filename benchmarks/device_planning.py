@@ -37,16 +37,18 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.report import cpu_model, device_planning_table
-from client.schemas import GraspQuery
-from service.clearance import clear_grasps
-from service.grip import MIN_GRIP_FRAMES, gripping_grasps
-from service.planner import HEADS, GraspPlanner, InferenceOptions
-from service.runtime import apply_threads, tune_malloc
-from service.vgn.checkpoint import weights_id
+from service.runtime import apply_threads, prepare_environment, tune_malloc
 
-# ``service`` (imported above) sets its OpenMP defaults before anything loads torch.
-import torch  # noqa: E402  isort:skip
+prepare_environment()  # the server's OpenMP defaults (service.server), before anything loads torch
+
+import torch  # noqa: E402
+
+from benchmarks.report import cpu_model, device_planning_table  # noqa: E402
+from client.schemas import GraspQuery  # noqa: E402
+from service.clearance import clear_grasps  # noqa: E402
+from service.grip import MIN_GRIP_FRAMES, gripping_grasps  # noqa: E402
+from service.planner import HEADS, GraspPlanner, InferenceOptions  # noqa: E402
+from service.vgn.checkpoint import weights_id  # noqa: E402
 
 # Not service.settings.PACKAGED_MODEL: that module needs pydantic-settings, which a GPU machine may lack.
 PACKAGED_MODEL = Path(__file__).resolve().parents[1] / "service" / "models" / "vgn.safetensors"

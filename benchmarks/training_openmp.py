@@ -1,14 +1,14 @@
-"""Does importing ``service`` (which sets the service's OpenMP defaults) slow ``vgn-train``?
+"""Would the service's OpenMP defaults slow ``vgn-train``?
 
     python -m benchmarks.training_openmp [--processes 3] [--steps 5] [--threads 2]
 
-``vgn-train`` imports the ``service`` package, and with it ``OMP_WAIT_POLICY=PASSIVE``
-(``service.runtime``), chosen for steady inference. Training runs other work through
+The server sets ``OMP_WAIT_POLICY=PASSIVE`` (``service.runtime``, from ``service.server``),
+chosen for steady inference. Training runs other work through
 OpenMP (bigger batches, a backward pass) with its own thread count, so this times a VGN
 training step — forward, loss, backward, Adam — on a (4, 1, 40, 40, 40) batch in the
 channels-last layout ``vgn-train`` uses, in fresh processes, alternately
 
-* with what importing ``service`` set (the baseline is how ``vgn-train`` runs), and
+* with what ``service.runtime.prepare_environment`` sets, as the server does, and
 * with those variables removed again before torch loads (libgomp's own default),
 
 and reports each condition's median step time and their ratio. Fresh processes, because
@@ -34,8 +34,9 @@ BATCH_SHAPE = (4, 1, 40, 40, 40)
 
 def child(condition: str, steps: int, threads: int) -> dict[str, Any]:
     """Time ``steps`` training steps (after one untimed) in this fresh process."""
-    import service  # noqa: F401  (sets the service's OpenMP defaults, as vgn-train's import does)
-    from service.runtime import _prepared
+    from service.runtime import _prepared, prepare_environment
+
+    prepare_environment()  # the server's OpenMP defaults, before torch loads
 
     if condition == "libgomp-default":
         for name in _prepared.get("set_by_service", []):

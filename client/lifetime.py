@@ -39,7 +39,8 @@ def end_with_parent(sig: int = signal.SIGTERM, parent: int | None = None) -> Non
 
 def ending_with_this_process(env: dict[str, str]) -> dict[str, str]:
     """``env`` for a child that should end with this process, however this process ends; the
-    child calls :func:`end_with_parent_if_asked` (importing ``service`` does).
+    child calls :func:`end_with_parent_if_asked` (the service's entry, ``service.server``,
+    does).
 
     The child asks for it after ``exec``, not through ``Popen(preexec_fn=...)``: a
     ``preexec_fn`` makes Python ``fork`` instead of ``vfork``, and a fork runs every library's

@@ -1,4 +1,4 @@
-"""The FastAPI application: ``uvicorn service.app:app``.
+"""The FastAPI application, served by ``uvicorn service.server:app`` (which prepares the process first).
 
 The model is loaded at start-up (lifespan), so importing this module is cheap and a
 misconfigured ``VGN_MODEL`` stops the server with a clear message instead of serving 500s.

@@ -12,6 +12,7 @@ from pathlib import Path
 import torch
 
 from client.log_level import add_log_level_option, configure_logging
+from service.runtime import prepare_environment
 from training import report
 from training.card import write_card
 from training.checkpoint import CheckpointMismatch, checkpoint_path
@@ -47,7 +48,7 @@ examples:
   vgn-train --data data --epochs 40 --copies 4 --patience 6 --out models/vgn.safetensors
   vgn-train --data raw/pile --data raw/packed --epochs 10 --out models/vgn.safetensors
   vgn-train --data data/pile --epochs 20 --out models/vgn.safetensors --resume   # 10 more epochs
-  VGN_MODEL=models/vgn.safetensors uvicorn service.app:app                      # serve them
+  VGN_MODEL=models/vgn.safetensors uvicorn service.server:app                   # serve them
 """
 
 
@@ -412,7 +413,7 @@ def summary(result: TrainResult) -> str:
         f"weights:    {result.weights}",
         f"model card: {result.card}",
         f"checkpoint: {result.checkpoint}",
-        f"serve with: VGN_MODEL={result.weights} uvicorn service.app:app",
+        f"serve with: VGN_MODEL={result.weights} uvicorn service.server:app",
     ]
     return "\n".join(lines)
 
@@ -422,6 +423,8 @@ def main(argv: list[str] | None = None) -> int:
     the summary; 2 for bad input, 130 when interrupted."""
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
+    # The service's OpenMP defaults, for the processes training starts (this one loaded torch already).
+    prepare_environment()
     if args.threads:
         torch.set_num_threads(args.threads)
     command = ["vgn-train", *(sys.argv[1:] if argv is None else argv)]
