@@ -10,9 +10,11 @@ Inputs:
 - ``docs/results/**/table.json``: ``python -m benchmarks.clutter --out FOLDER`` writes it (one row
   per planner, selection and scenario, with 95 % Wilson intervals, and the date and machine the
   rounds ran on); copy the folder, or just its ``table.json`` and ``table.md``, under
-  ``docs/results/``. Every folder becomes one table on the benchmark page. A ``variant.md`` beside
-  it says how the service under test differed from the shipped code (a control): the benchmark page
-  shows it and the README's table leaves the folder out.
+  ``docs/results/``. Every folder becomes one table: on the benchmark page (``clutter.md``) when
+  the README's table uses it (the shipped model's results), else on the experiments page
+  (``experiments.md``), grouped by name prefix under :data:`EXPERIMENT_GROUPS`' questions. A
+  ``variant.md`` beside it says how the service under test differed from the shipped code (a
+  control): the table shows it and the README's table leaves the folder out.
 - ``docs/results/**/latency.json``: ``python -m benchmarks.latency --json FOLDER/latency.json``.
   Every file becomes one table on the performance page.
 - ``docs/results/**/device_planning.json``: ``python -m benchmarks.device_planning time VOLUME.npz
@@ -25,7 +27,7 @@ Inputs:
   ``service/models/vgn.card.json`` (the shipped model's card).
 
 Outputs in ``docs/generated/`` (included into the pages by ``pymdownx.snippets``): ``clutter.md``,
-``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
+``experiments.md``, ``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
 ``operating-curves.md`` (clutter results of one model and request at several thresholds; drawn by
 ``python -m benchmarks.operating_curve``), ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
 results exist, the block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` in
@@ -198,18 +200,89 @@ def clutter_table(folder: Path, rows: list[dict[str, Any]]) -> list[str]:
 
 
 def clutter_page(results: Path) -> str:
-    """Every clutter-removal results folder as a table, newest first."""
+    """The shipped model's results (the folders the README's table is made of) as tables, newest
+    first; every other folder is an experiment (:func:`experiments_page`)."""
     runs = clutter_runs(results)
     if not runs:
         return (
             "No clutter-removal result files are in `docs/results/` yet. Run the benchmark (above), copy its "
             "`--out` folder there and run `python -m benchmarks.report`.\n"
         )
+    shipped = headline_folders(results)
+    others = len(runs) - len(shipped)
+    text = clutter_tables([run for run in runs if run[0] in shipped], results)
+    if others:
+        text += (
+            f"\nThe other {others} result folders (earlier models, controls and experiments) are on the "
+            "[Experiments](experiments.md) page, grouped by the question each answers.\n"
+        )
+    return text
+
+
+#: The experiments' groups, by result folder name prefix (the first that matches), each with the
+#: question its runs answer. A folder that matches none goes under "Other runs".
+EXPERIMENT_GROUPS: list[tuple[str, str]] = [
+    ("shipped-", "How do the shipped weights trade success for objects cleared at other thresholds? "
+                 "(With earlier runs of their default request, which newer results replace in the README's table.)"),
+    ("alternatives-", "When a check drops a grasp, do other poses under other rules than the shipped ones "
+                      "(any grip, no steps back) find grasps that hold?"),
+    ("control-before-alternatives-", "Control: the service before other poses and the fallback threshold."),
+    ("no-alternatives-", "Control: the fallback threshold without other poses."),
+    ("antipodal-", "How does the geometric antipodal baseline do with the same checks and other poses?"),
+    ("all-data-cpu-", "How did the run that trained the shipped weights do at its earlier epochs? (With runs "
+                      "of its final weights that newer results replace in the README's table.)"),
+    ("checked-distill-", "Can a network taught the service's checks give in one plain pass what the default "
+                         "request gets from the checks?"),
+    ("checks-gpu-", "How do weights taught the checks on a GPU do along the threshold, plain and default?"),
+    ("answers-", "Does labelling the network's own answers as training data help?"),
+    ("gpu-distill-", "What did self-distillation on a GPU buy the previous model?"),
+    ("paired-", "Which training observations make the better model (the same scenes, seeds and recipe)?"),
+    ("square-grip-", "What does the grip check's preference for square grips change (the previous model)?"),
+    ("no-preference-control-", "Control: the grip check without its preference for square grips."),
+    ("closed-loop-", "Does watching while approaching, or a wrist-camera scan, help (the model shipped two "
+                     "versions ago)?"),
+    ("without-grip", "What does the grip check change? Without it (the model shipped two versions ago)."),
+    ("default", "The same with the grip check: that model's default request."),
+    ("turns-only", "Turn averaging alone, without the checks (the previous model)."),
+]  # fmt: skip
+
+
+def experiment_group(name: str) -> str:
+    """The :data:`EXPERIMENT_GROUPS` prefix a folder's path under the results starts with ("" for none)."""
+    return next((prefix for prefix, _ in EXPERIMENT_GROUPS if name.startswith(prefix)), "")
+
+
+def experiments_page(results: Path) -> str:
+    """Every clutter-removal results folder but the shipped model's, grouped by the question it
+    answers (:data:`EXPERIMENT_GROUPS`), each group's tables newest first."""
+    shipped = headline_folders(results)
+    runs = [run for run in clutter_runs(results) if run[0] not in shipped]
+    if not runs:
+        return "No result folders beside the shipped model's are in `docs/results/`.\n"
+    questions = dict(EXPERIMENT_GROUPS) | {"": "Result folders no group of `EXPERIMENT_GROUPS` names yet."}
+    grouped: dict[str, list[tuple[Path, list[dict[str, Any]]]]] = {}
+    for run in runs:
+        grouped.setdefault(experiment_group(relative(run[0], results)), []).append(run)
+    parts = []
+    for prefix in [*(prefix for prefix, _ in EXPERIMENT_GROUPS), ""]:
+        if prefix not in grouped:
+            continue
+        title = f"`{prefix}*`" if prefix else "Other runs"
+        folders = grouped[prefix]
+        parts.append(f"## {title}\n\n{questions[prefix]} ({len(folders)} result folders)\n")
+        parts.append(clutter_tables(folders, results, heading="###"))
+    return "\n".join(parts)
+
+
+def clutter_tables(
+    runs: list[tuple[Path, list[dict[str, Any]]]], results: Path, heading: str = "####"
+) -> str:
+    """Results folders as tables, newest first, each under a ``heading`` naming the folder."""
     parts = []
     for folder, rows in sorted(runs, key=lambda run: newest_date(run), reverse=True):
         models = sorted({str(row.get("model")) for row in rows if row.get("model")})
         settings = clutter_settings(folder)
-        parts.append(f"#### `{relative(folder, results)}`\n")
+        parts.append(f"{heading} `{relative(folder, results)}`\n")
         facts = [settings] if settings else []
         facts += [f"model {', '.join(f'`{m}`' for m in models)}"] if models else []
         changed = variant(folder)
@@ -272,12 +345,15 @@ def shipped_threshold() -> float | None:
         return None
 
 
-def headline_table(results: Path) -> str | None:
-    """The README's table: success / cleared per scenario (rows) and planner (columns), from the
-    newest run of each, random selection (the paper's), next to the paper's VGN; only runs of the
-    packaged weights at their operating threshold (and the weight-free baseline) on the shipped code
-    (no ``variant.md``); None without results."""
-    cells: dict[tuple[str, str], tuple[str, str]] = {}  # (scenario, planner) -> (measured at, text)
+#: A cell of the README's table: when its row was measured, its text and the folder it came from.
+HeadlineCell = tuple[str, str, Path]
+
+
+def headline_cells(results: Path) -> tuple[dict[tuple[str, str], HeadlineCell], list[str]]:
+    """The README table's cells by (scenario, planner), and its planners in order of first sight:
+    the newest run of each, random selection (the paper's), only runs of the packaged weights at
+    their operating threshold (and the weight-free baseline) on the shipped code (no ``variant.md``)."""
+    cells: dict[tuple[str, str], HeadlineCell] = {}
     planners: list[str] = []
     shipped, threshold = shipped_model_id(), shipped_threshold()
     for folder, rows in clutter_runs(results):
@@ -298,9 +374,21 @@ def headline_table(results: Path) -> str | None:
             when = measured_at(row_measured(row, folder))
             text = f"{row['success_rate']:.1f} / {row['percent_cleared']:.1f} / {no_grasp_cell(row)}"
             if (scenario, row["planner"]) not in cells or when >= cells[scenario, row["planner"]][0]:
-                cells[scenario, row["planner"]] = (when, text)
+                cells[scenario, row["planner"]] = (when, text, folder)
             if row["planner"] not in planners:
                 planners.append(row["planner"])
+    return cells, planners
+
+
+def headline_folders(results: Path) -> set[Path]:
+    """The result folders the README's table is made of: the shipped model's results."""
+    return {folder for _, _, folder in headline_cells(results)[0].values()}
+
+
+def headline_table(results: Path) -> str | None:
+    """The README's table (:func:`headline_cells`): success / cleared per scenario (rows) and
+    planner (columns) next to the paper's VGN; None without results."""
+    cells, planners = headline_cells(results)
     if not cells:
         return None
     # VGN plain first, then by the options added; the weight-free baseline last.
@@ -892,6 +980,7 @@ def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
     """Generated file name -> (its source, for the header; the function that makes its text)."""
     return {
         "clutter.md": ("docs/results/**/table.json", lambda: clutter_page(results)),
+        "experiments.md": ("docs/results/**/table.json", lambda: experiments_page(results)),
         "latency.md": ("docs/results/**/latency.json", lambda: latency_page(results)),
         "device-planning.md": ("docs/results/**/device_planning.json", lambda: device_planning_page(results)),
         "fleet.md": ("docs/results/**/fleet.json", lambda: fleet_page(results)),

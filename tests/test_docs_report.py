@@ -31,7 +31,8 @@ def clutter_results(
     return folder
 
 
-def test_clutter_table_has_intervals_failures_and_where_it_was_measured(tmp_path: Path):
+def test_clutter_table_has_intervals_failures_and_where_it_was_measured(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     clutter_results(tmp_path, [ROW])
     page = report.clutter_page(tmp_path)
     assert "#### `bench-a`" in page
@@ -42,7 +43,8 @@ def test_clutter_table_has_intervals_failures_and_where_it_was_measured(tmp_path
     assert "2031-02-03, Example CPU 9000 (2 cores)" in line
 
 
-def test_a_row_without_a_record_takes_the_folders_measured_json(tmp_path: Path):
+def test_a_row_without_a_record_takes_the_folders_measured_json(tmp_path: Path, monkeypatch):
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     row = {key: value for key, value in ROW.items() if key != "measured"}
     folder = clutter_results(tmp_path, [row])
     assert "date and machine not recorded" in report.clutter_page(tmp_path)
@@ -124,7 +126,7 @@ def test_the_command_writes_then_checks(tmp_path: Path, monkeypatch):
     assert report.main(argv) == 0
     assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md", "http-endpoints.md",
                                                "model-card.md", "training-data.md", "fleet.md", "device-planning.md",
-                                               "operating-curves.md", "clear-scene-options.md"}  # fmt: skip
+                                               "operating-curves.md", "clear-scene-options.md", "experiments.md"}  # fmt: skip
     assert "| `vgn+turns+clearance` |" in readme.read_text()
     assert "| `--views` six\\|side\\|random | `six` |" in (out / "clear-scene-options.md").read_text()
     assert "`VGN_TURN_AVERAGE`" in (out / "configuration.md").read_text()
@@ -210,7 +212,8 @@ def test_a_variant_is_named_on_the_page_and_left_out_of_the_readme(tmp_path: Pat
     control = clutter_results(tmp_path / "b-control", [{**ROW, "success_rate": 41.0}])
     (control / "variant.md").write_text("the grip check\nwithout its preference.\n")
     assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
-    page = report.clutter_page(tmp_path)
+    assert "variant:" not in report.clutter_page(tmp_path)
+    page = report.experiments_page(tmp_path)
     assert "variant: the grip check without its preference." in page
     assert page.count("variant:") == 1
 
@@ -262,3 +265,30 @@ def test_runs_on_objects_of_another_source_get_their_own_row(tmp_path: Path, mon
         "the newer cross-source run does not replace it"
     )
     assert "| pile-5, cross-source objects | 70.0 / 44.4 / - | - |" in lines
+
+
+def test_the_benchmark_page_holds_the_shipped_model_and_experiments_their_own_page(
+    tmp_path: Path, monkeypatch
+):
+    """The benchmark page tables the folders the README's table is made of; every other folder goes
+    to the experiments page, under its name prefix's question, and one no prefix names under
+    "Other runs"."""
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    clutter_results(tmp_path / "shipped-default", [ROW])
+    clutter_results(tmp_path / "paired-fresh", [{**ROW, "model": "fedcba987654"}])
+    clutter_results(tmp_path / "paired-fixed", [{**ROW, "model": "fedcba987654"}])
+    clutter_results(tmp_path / "new-idea", [{**ROW, "model": "fedcba987654"}])
+    benchmark = report.clutter_page(tmp_path)
+    assert "#### `shipped-default/bench-a`" in benchmark and "paired-" not in benchmark
+    assert "56.2 (51.2-61.1)" in benchmark, "intervals stay"
+    assert "The other 3 result folders" in benchmark and "(experiments.md)" in benchmark
+    experiments = report.experiments_page(tmp_path)
+    assert "shipped-default" not in experiments
+    question = dict(report.EXPERIMENT_GROUPS)["paired-"]
+    assert f"## `paired-*`\n\n{question} (2 result folders)" in experiments
+    assert "### `paired-fresh/bench-a`" in experiments and "### `paired-fixed/bench-a`" in experiments
+    assert (
+        experiments.index("## `paired-*`")
+        < experiments.index("## Other runs")
+        < experiments.index("new-idea")
+    )
