@@ -30,6 +30,9 @@ from vgn_data.files import remove_stale_temporaries, write_atomically
 
 MANIFEST = "manifest.json"
 SHARD_FORMAT = 1
+# Precision kept: the quantised grid is within 1/510 (about 0.002) of the network input, and float16
+# labels keep positions to 0.25 mm, a 30th of a voxel. The xz stream is about a quarter smaller than
+# the .npz's own deflate on these grids.
 QUANTISATION = "uint8 = round(255 * grid)"
 #: Scenes per shard: about 10 MB at ~10 kB a scene (grid and labels compressed).
 DEFAULT_SCENES_PER_SHARD = 1000
