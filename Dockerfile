@@ -22,4 +22,4 @@ ENV VGN_DEVICE=cpu
 ENV VGN_GRPC_HOST=0.0.0.0 VGN_GRPC_PORT=50051
 EXPOSE 8000 50051
 HEALTHCHECK --interval=30s --timeout=5s CMD python -c "import httpx; httpx.get('http://127.0.0.1:8000/healthz').raise_for_status()"
-CMD ["uvicorn", "service.server:app", "--host", "0.0.0.0", "--port", "8000"]
+CMD ["uvicorn", "service.app:app", "--host", "0.0.0.0", "--port", "8000"]

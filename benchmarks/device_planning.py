@@ -39,7 +39,7 @@ import numpy as np
 
 from service.runtime import apply_threads, prepare_environment, tune_malloc
 
-prepare_environment()  # the server's OpenMP defaults (service.server), before anything loads torch
+prepare_environment()  # the server's OpenMP defaults (service.app), before anything loads torch
 
 import torch  # noqa: E402
 

@@ -45,7 +45,7 @@ and checks the project's targets:
 * on a GPU only: grasp p50 <= 5 ms and 32 sessions get >= 8x the throughput of one.
 * gRPC: frame upload p50 no slower than HTTP's, streamed frames >= 150 per second.
 
-The servers start with the *default configuration* (``uvicorn service.server:app`` with no
+The servers start with the *default configuration* (``uvicorn service.app:app`` with no
 ``VGN_TORCH_THREADS``, ``VGN_PRECISION`` or OpenMP variables) unless ``--threads`` is given;
 the baseline runs in this process with the thread count the service chose (read from
 ``GET /model``), so the two differ only in how the network is computed.

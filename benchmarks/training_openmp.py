@@ -2,7 +2,7 @@
 
     python -m benchmarks.training_openmp [--processes 3] [--steps 5] [--threads 2]
 
-The server sets ``OMP_WAIT_POLICY=PASSIVE`` (``service.runtime``, from ``service.server``),
+The server sets ``OMP_WAIT_POLICY=PASSIVE`` (``service.runtime``, from ``service.app``),
 chosen for steady inference. Training runs other work through
 OpenMP (bigger batches, a backward pass) with its own thread count, so this times a VGN
 training step — forward, loss, backward, Adam — on a (4, 1, 40, 40, 40) batch in the

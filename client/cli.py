@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     serve = commands.add_parser(
         "serve",
-        help="run the service (uvicorn service.server:app), or a fleet of replicas behind HAProxy",
+        help="run the service (uvicorn service.app:app), or a fleet of replicas behind HAProxy",
         description="Run the service. With --replicas N, run N service processes on loopback ports of their "
         "own behind HAProxy, which listens on --host/--port (HTTP) and --grpc-port and routes each session to "
         "one replica (docs/fleet.md); a replica that dies is started again. Ctrl-C or SIGTERM stops them all.",
@@ -295,7 +295,7 @@ def _serve(args: argparse.Namespace) -> int:
         return 1
     grpc = f"gRPC on grpc://{grpc_host}:{grpc_port}" if grpc_port != "0" else "gRPC off"
     print(f"serving HTTP on http://{args.host}:{args.port}, {grpc}", file=sys.stderr)
-    uvicorn.run("service.server:app", host=args.host, port=args.port)
+    uvicorn.run("service.app:app", host=args.host, port=args.port)
     return 0
 
 

@@ -1,6 +1,6 @@
 """Start the service in its own process on a free loopback port, for when no URL is given.
 
-The client package does not import the service: it runs ``python -m uvicorn service.server:app``
+The client package does not import the service: it runs ``python -m uvicorn service.app:app``
 in a child process, so it needs the ``service`` extra installed but keeps this process free
 of torch and open3d.
 """
@@ -42,7 +42,7 @@ def bind_error(host: str, port: int) -> OSError | None:
 
 
 class EmbeddedService:
-    """A uvicorn child process serving ``service.server:app``; a context manager that stops it.
+    """A uvicorn child process serving ``service.app:app``; a context manager that stops it.
 
     ``env`` adds ``VGN_*`` settings (e.g. ``{"VGN_MODEL": path}``) to the child's environment;
     ``unset`` names variables of this process the child must not inherit.
@@ -88,7 +88,7 @@ class EmbeddedService:
             sys.executable,
             "-m",
             "uvicorn",
-            "service.server:app",
+            "service.app:app",
             "--host",
             self.host,
             "--port",

@@ -39,7 +39,7 @@ def end_with_parent(sig: int = signal.SIGTERM, parent: int | None = None) -> Non
 
 def ending_with_this_process(env: dict[str, str]) -> dict[str, str]:
     """``env`` for a child that should end with this process, however this process ends; the
-    child calls :func:`end_with_parent_if_asked` (the service's entry, ``service.server``,
+    child calls :func:`end_with_parent_if_asked` (the service's entry, ``service.app``,
     does).
 
     The child asks for it after ``exec``, not through ``Popen(preexec_fn=...)``: a

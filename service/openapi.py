@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from service.app import create_app
+from service.http_app import create_app
 from service.settings import Settings
 
 DEFAULT_PATH = Path(__file__).resolve().parent.parent / "openapi.json"

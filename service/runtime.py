@@ -7,7 +7,7 @@ left to fusion and HTTP); ``OMP_WAIT_POLICY=PASSIVE``, so threads sleep at barri
 spinning against other processes and a preempted thread does not stall the rest (children
 inherit it); and glibc's allocator keeping freed blocks of up to 32 MB (:func:`tune_malloc`),
 so a request's network outputs do not pay page faults on every allocation. libgomp reads its
-environment once, when torch loads it, so the server's entry (``service.server``) runs
+environment once, when torch loads it, so the server's entry (``service.app``) runs
 :func:`prepare_environment` before anything imports torch. Figures: docs/design.md.
 """
 

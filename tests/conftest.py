@@ -18,7 +18,7 @@ import torch
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.app import create_app
+from service.http_app import create_app
 from service.core import PlanningService
 from service.settings import Settings
 from service.vgn.checkpoint import save_vgn

@@ -37,11 +37,11 @@ RULES: dict[str, frozenset[str]] = {
 #: dependency of that file: add it on purpose, not to make the test pass.
 RUNTIME_DISPATCH: frozenset[tuple[str, str]] = frozenset(
     {
-        ("client/cli.py", "service.server:app"),
+        ("client/cli.py", "service.app:app"),
         ("client/cli.py", "sim_worker.clear_scene"),
         ("client/cli.py", "sim_worker.generate_data"),
         ("client/cli.py", "vgn_data.clean_data"),
-        ("client/embedded.py", "service.server:app"),
+        ("client/embedded.py", "service.app:app"),
     }
 )
 

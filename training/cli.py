@@ -48,7 +48,7 @@ examples:
   vgn-train --data data --epochs 40 --copies 4 --patience 6 --out models/vgn.safetensors
   vgn-train --data raw/pile --data raw/packed --epochs 10 --out models/vgn.safetensors
   vgn-train --data data/pile --epochs 20 --out models/vgn.safetensors --resume   # 10 more epochs
-  VGN_MODEL=models/vgn.safetensors uvicorn service.server:app                   # serve them
+  VGN_MODEL=models/vgn.safetensors uvicorn service.app:app                   # serve them
 """
 
 
@@ -413,7 +413,7 @@ def summary(result: TrainResult) -> str:
         f"weights:    {result.weights}",
         f"model card: {result.card}",
         f"checkpoint: {result.checkpoint}",
-        f"serve with: VGN_MODEL={result.weights} uvicorn service.server:app",
+        f"serve with: VGN_MODEL={result.weights} uvicorn service.app:app",
     ]
     return "\n".join(lines)
 

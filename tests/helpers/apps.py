@@ -6,7 +6,7 @@ from pathlib import Path
 
 from fastapi.testclient import TestClient
 
-from service.app import create_app
+from service.http_app import create_app
 from service.core import PlanningService
 from service.settings import Settings
 

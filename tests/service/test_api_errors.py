@@ -26,7 +26,7 @@ from PIL import Image
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.app import MULTIPART_OVERHEAD, create_app
+from service.http_app import MULTIPART_OVERHEAD, create_app
 from service.core import PlanningService
 from service.settings import Settings
 from tests.helpers.frames import (

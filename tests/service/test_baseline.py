@@ -7,7 +7,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from client.schemas import GraspQuery, SessionCreate
-from service.app import create_app
+from service.http_app import create_app
 from service.baseline import AntipodalConfig, plan_antipodal
 from service.core import PlanningService
 from service.settings import Settings

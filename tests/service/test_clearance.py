@@ -18,7 +18,7 @@ from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
 from client.schemas import GraspQuery, GraspResult, SessionCreate
-from service.app import create_app
+from service.http_app import create_app
 from service.clearance import (
     MAX_OPENING,
     PREGRASP_DISTANCE,

@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 
 from client.http import VGNClient
 from client.schemas import SessionCreate
-from service.app import create_app
+from service.http_app import create_app
 from service.cloud_fusion import CloudFusion
 from service.core import PlanningService
 from service.settings import Settings

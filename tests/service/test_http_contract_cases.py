@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from fastapi.testclient import TestClient
 
-from service.app import create_app
+from service.http_app import create_app
 from service.openapi import render
 from service.settings import Settings
 

@@ -2,7 +2,7 @@
 
 A library import that rewrites the environment or arms a parent-death signal surprises every
 program that imports it (a notebook, a benchmark, a training run). The server's own process
-preparation lives in its entry, ``service.server`` (``uvicorn service.server:app``). Each check
+preparation lives in its entry, ``service.app`` (``uvicorn service.app:app``). Each check
 runs in a fresh interpreter, since an import happens once per process.
 """
 
@@ -54,15 +54,15 @@ def probe(*modules: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def test_importing_service_and_its_app_leaves_the_process_alone():
-    result = probe("service", "service.app")
+def test_importing_service_and_its_application_leaves_the_process_alone():
+    result = probe("service", "service.http_app")
     assert result["changed"] == []
     assert result["pdeathsig"] in (0, None)
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signals are Linux's")
 def test_the_server_entry_prepares_its_process():
-    result = probe("service.server")
+    result = probe("service.app")
     assert result["omp"] == "PASSIVE"
     assert set(result["changed"]) == {"OMP_WAIT_POLICY", "VGN_END_WITH_PARENT"}  # the latter consumed
     assert result["pdeathsig"] == signal.SIGTERM

@@ -15,7 +15,7 @@ import pytest
 
 from client.embedded import EmbeddedService
 from service.api import docs
-from service.app import create_app
+from service.http_app import create_app
 from service.settings import Settings
 from tests.helpers.browser import headless_chromium
 

@@ -60,7 +60,7 @@ def test_malloc_is_tuned_on_glibc_unless_the_operator_tuned_it():
 
 
 def test_a_plain_start_sets_openmp_before_torch_and_reports_it(random_checkpoint):
-    """``uvicorn service.server:app`` with none of the variables set, as the embedded service
+    """``uvicorn service.app:app`` with none of the variables set, as the embedded service
     (and an operator) starts it."""
     with EmbeddedService(
         model=random_checkpoint, env={"VGN_API_KEY": ""}, unset=OPERATOR_VARIABLES
