@@ -18,8 +18,8 @@ import torch
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.http_app import create_app
 from service.core import PlanningService
+from service.http_app import create_app
 from service.settings import Settings
 from service.vgn.checkpoint import save_vgn
 from service.vgn.network import VGN

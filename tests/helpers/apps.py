@@ -6,8 +6,8 @@ from pathlib import Path
 
 from fastapi.testclient import TestClient
 
-from service.http_app import create_app
 from service.core import PlanningService
+from service.http_app import create_app
 from service.settings import Settings
 
 

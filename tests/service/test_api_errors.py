@@ -26,8 +26,8 @@ from PIL import Image
 
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from service.http_app import MULTIPART_OVERHEAD, create_app
 from service.core import PlanningService
+from service.http_app import MULTIPART_OVERHEAD, create_app
 from service.settings import Settings
 from tests.helpers.frames import (
     DEPTH,

@@ -7,9 +7,9 @@ import pytest
 from fastapi.testclient import TestClient
 
 from client.schemas import GraspQuery, SessionCreate
-from service.http_app import create_app
 from service.baseline import AntipodalConfig, plan_antipodal
 from service.core import PlanningService
+from service.http_app import create_app
 from service.settings import Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 

@@ -18,7 +18,6 @@ from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
 from client.schemas import GraspQuery, GraspResult, SessionCreate
-from service.http_app import create_app
 from service.clearance import (
     MAX_OPENING,
     PREGRASP_DISTANCE,
@@ -29,6 +28,7 @@ from service.clearance import (
 )
 from service.core import PlanningService
 from service.grpc.server import build_server
+from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 

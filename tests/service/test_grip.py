@@ -13,10 +13,10 @@ from scipy.spatial.transform import Rotation
 from client.grpc_api import convert
 from client.grpc_client import GRPCClient
 from client.schemas import Grasp, GraspQuery, GraspResult, SessionCreate
-from service.http_app import create_app
 from service.core import PlanningService
 from service.grip import GripConfig, GripMeasure, gripping_grasps, measure_grip
 from service.grpc.server import build_server
+from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 

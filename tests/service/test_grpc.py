@@ -24,9 +24,9 @@ from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient, frame_message
 from client.http import VGNClient
-from service.http_app import create_app
 from service.core import PlanningService
 from service.grpc.server import SERVICE_NAME, GRPCPortError, build_server
+from service.http_app import create_app
 from service.settings import Settings
 from service.tsdf import SceneVolume
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views

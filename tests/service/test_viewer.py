@@ -16,8 +16,8 @@ from PIL import Image
 
 from client.geometry import FINGER_DEPTH
 from client.schemas import Grasp
-from service.http_app import create_app
 from service.core import PlanningService
+from service.http_app import create_app
 from service.settings import Settings
 from service.viewer.scene import grasp_outline, tilt_degrees
 from tests.helpers.browser import headless_chromium
