@@ -15,7 +15,7 @@ import pytest
 from client import AsyncVGNClient, GRPCClient, NotFound, VGNClient
 from client.embedded import EmbeddedService
 from client.recovery import Replay, is_lost
-from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 
 VIEWS = circle_views(3)
 DEPTHS = [BoxScene().depth(pose) for pose in VIEWS]
@@ -80,6 +80,26 @@ def test_sessions_are_rebuilt_after_the_service_is_replaced(restartable: Restart
         with pytest.raises(NotFound, match="does not exist"):  # past its bounds: the original error
             small.grasps(too_big, **QUERY)
         assert (http.rebuilds, rpc.rebuilds, small.rebuilds) == (3, 1, 0)
+
+
+def test_a_forgetting_session_is_rebuilt_in_the_order_its_frames_came(restartable: Restartable) -> None:
+    """With ``decay`` the order of the frames matters: the box moved, and the volume follows its
+    latest place. A rebuild that replayed the frames in another order would show the old place."""
+    moved = BoxScene(lower=(0.05, 0.05, TABLE_Z), upper=(0.11, 0.11, TABLE_Z + 0.08))
+    frames = [(BoxScene().depth(pose), pose) for pose in VIEWS] + [(moved.depth(pose), pose) for pose in VIEWS]
+    with VGNClient(restartable.service.url) as http:
+        kept = http.create_session(intrinsics=INTRINSICS, decay=0.5).session_id
+        reversed_order = http.create_session(intrinsics=INTRINSICS, decay=0.5).session_id
+        for depth, pose in frames:
+            http.add_frame(kept, depth, pose)
+        for depth, pose in reversed(frames):
+            http.add_frame(reversed_order, depth, pose)
+        grid, other = http.tsdf(kept), http.tsdf(reversed_order)
+        assert np.abs(grid - other).max() > 0.5  # the order shows in the volume, beyond rounding
+
+        restartable.restart()
+
+        np.testing.assert_allclose(http.tsdf(kept), grid, atol=1e-5)
 
 
 def test_a_session_that_ended_is_not_rebuilt(restartable: Restartable) -> None:
