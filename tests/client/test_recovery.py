@@ -86,7 +86,9 @@ def test_a_forgetting_session_is_rebuilt_in_the_order_its_frames_came(restartabl
     """With ``decay`` the order of the frames matters: the box moved, and the volume follows its
     latest place. A rebuild that replayed the frames in another order would show the old place."""
     moved = BoxScene(lower=(0.05, 0.05, TABLE_Z), upper=(0.11, 0.11, TABLE_Z + 0.08))
-    frames = [(BoxScene().depth(pose), pose) for pose in VIEWS] + [(moved.depth(pose), pose) for pose in VIEWS]
+    frames = [(BoxScene().depth(pose), pose) for pose in VIEWS] + [
+        (moved.depth(pose), pose) for pose in VIEWS
+    ]
     with VGNClient(restartable.service.url) as http:
         kept = http.create_session(intrinsics=INTRINSICS, decay=0.5).session_id
         reversed_order = http.create_session(intrinsics=INTRINSICS, decay=0.5).session_id
