@@ -5,10 +5,12 @@ from __future__ import annotations
 import sys
 
 from client.extras import missing_extra
+from client.lifetime import end_with_parent_if_asked
 
 
 def main(argv: list[str] | None = None) -> int:
     """Start rclpy and spin the node; 2 with the reason for a missing extra or a bad parameter."""
+    end_with_parent_if_asked()  # started by a test or a launcher that may be killed outright
     try:
         import rclpy
         from rclpy.executors import ExternalShutdownException

@@ -20,6 +20,7 @@ from visualization_msgs.msg import MarkerArray
 
 from client.connect import connect
 from client.http import NotFound, VGNError
+from client.recovery import Replay
 from client.schemas import Grasp
 from ros_bridge import outputs, settings
 from ros_bridge.assemble import Frame, FrameAssembler
@@ -29,13 +30,17 @@ from ros_bridge.problems import Complaints, Refused
 #: What a call to an unreachable or failing service raises, over HTTP and gRPC.
 SERVICE_ERRORS = (VGNError, httpx.TransportError, ConnectionError, TimeoutError)
 IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "depth/image_rect", "depth/camera_info", "camera_pose"
+#: The client's rebuilding of a session lost with a replica, kept short: the node fuses on its one
+#: thread, and a camera streams on while a call waits, so a frame is better refused than late.
+REPLAY = Replay(attempts=2)
 #: How often frames waiting for their camera info or pose are looked at again (s).
 POLL_PERIOD = 0.05
 
 
 class BridgeNode(Node):
     """Fuses each depth frame into one service session; ``~/plan`` publishes the ranked grasps,
-    ``~/reset`` empties the session. ``ValueError`` at construction names a bad parameter."""
+    ``~/reset`` empties the session, ``~/status`` says what the bridge has. ``ValueError`` at
+    construction names a bad parameter."""
 
     def __init__(self, name: str = "vgn_bridge", **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
@@ -43,7 +48,9 @@ class BridgeNode(Node):
         self.settings = settings.read(self)
         self.counts = {"received": 0, "fused": 0, "refused": 0}
         self._complaints = Complaints(self.get_logger().warning)
-        self._client = connect(self.settings.service_url, self.settings.api_key, self.settings.timeout)
+        self._client = connect(
+            self.settings.service_url, self.settings.api_key, self.settings.timeout, REPLAY
+        )
         self._session: str | None = None
         self._topic_poses: TopicPoses | None = None
         info_topic = self.resolve_topic_name(INFO_TOPIC)
@@ -58,6 +65,7 @@ class BridgeNode(Node):
         self._markers = self.create_publisher(MarkerArray, "~/grasp_markers", 1)
         self.create_service(Trigger, "~/plan", self._plan)
         self.create_service(Trigger, "~/reset", self._reset)
+        self.create_service(Trigger, "~/status", self._report_status)
         self.create_timer(POLL_PERIOD, self._poll)
         self.get_logger().info(
             f"fusing {self.resolve_topic_name(IMAGE_TOPIC)} into a session on {self.settings.service_url} "
@@ -147,9 +155,23 @@ class BridgeNode(Node):
             )
         return Refused("service", f"the service at {url} {what}: {type(error).__name__}: {error}")
 
-    def _status(self) -> str:
+    def _counts(self) -> str:
         c = self.counts
         return f"frames: {c['received']} received, {c['fused']} fused, {c['refused']} refused"
+
+    def _report_status(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """What the bridge has: its session, its counts, the camera info and the poses it holds."""
+        info = self._frames.info
+        camera = f"{info.width}x{info.height}" if info is not None else "none yet"
+        poses = (
+            f"{len(self._topic_poses)} kept" if self._topic_poses is not None else self.settings.pose_source
+        )
+        session = self._session or "not opened yet"
+        response.success = True
+        response.message = (
+            f"session: {session}; {self._counts()}; camera info: {camera}; camera poses: {poses}"
+        )
+        return response
 
     def _plan(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
@@ -157,13 +179,13 @@ class BridgeNode(Node):
         except SERVICE_ERRORS as error:
             problem = self._service_problem(error, "did not plan")
             self._complaints.report(problem)
-            response.success, response.message = False, f"{problem}; {self._status()}"
+            response.success, response.message = False, f"{problem}; {self._counts()}"
             return response
         self._publish(result.grasps)
         response.success = True
         response.message = (
             f"{len(result.grasps)} grasps from {result.frame_count} fused frames "
-            f"(threshold {result.threshold:.2f}); {self._status()}"
+            f"(threshold {result.threshold:.2f}); {self._counts()}"
         )
         return response
 

@@ -46,6 +46,9 @@ class TopicPoses:
         self._topic, self._world, self._tolerance = topic, world_frame, tolerance
         self._poses: deque[tuple[float, str, Pose]] = deque(maxlen=keep)
 
+    def __len__(self) -> int:
+        return len(self._poses)
+
     def add(self, msg: PoseStamped | TransformStamped) -> None:
         """Keep a pose; ``Refused`` for one in another frame than the world frame, or not rigid."""
         frame = msg.header.frame_id
