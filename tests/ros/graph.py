@@ -93,9 +93,13 @@ class Graph:
 class Bridge:
     """``python -m ros_bridge`` (what ``vgn-ros`` runs) under ``namespace``, logging to a file."""
 
-    def __init__(self, namespace: str, parameters: dict[str, Any], log: Path) -> None:
+    def __init__(
+        self, namespace: str, parameters: dict[str, Any], log: Path, params_file: Path | None = None
+    ) -> None:
         self.namespace, self.log = namespace, log
         args = [sys.executable, "-m", "ros_bridge", "--ros-args", "-r", f"__ns:={namespace}"]
+        if params_file is not None:
+            args += ["--params-file", str(params_file)]
         for name, value in parameters.items():
             args += ["-p", f"{name}:={_yaml(value)}"]
         env = {**os.environ, "RCUTILS_LOGGING_BUFFERED_STREAM": "0", "RCUTILS_COLORIZED_OUTPUT": "0"}

@@ -24,7 +24,9 @@ from client.embedded import EmbeddedService, free_port  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
 from tests.ros.graph import RELIABLE, Bridge, Graph, private_domain  # noqa: E402
 
-SAMPLE = Path(__file__).resolve().parents[2] / "examples" / "sample_scene.npz"
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLE = ROOT / "examples" / "sample_scene.npz"
+PARAMETERS_FILE = ROOT / "examples" / "ros2" / "vgn_bridge.yaml"
 GRASP_OPTIONS = {"max_grasps": 5}
 
 
@@ -107,10 +109,12 @@ def start(graph: Graph, tmp_path: Path) -> Iterator:
     """Start a bridge with parameters (``wait`` short, the pose from the topic); yields a camera for it."""
     running: list[tuple[Bridge, Camera]] = []
 
-    def start(camera: Intrinsics | None, **parameters: object) -> tuple[Bridge, Camera]:
+    def start(
+        camera: Intrinsics | None, params_file: Path | None = None, **parameters: object
+    ) -> tuple[Bridge, Camera]:
         namespace = f"/vgn_test_{uuid.uuid4().hex[:8]}"
         defaults = {"pose_source": "topic", "reliable": True, "wait": 0.3, "timeout": 5.0}
-        bridge = Bridge(namespace, defaults | parameters, tmp_path / f"{namespace[1:]}.log")
+        bridge = Bridge(namespace, defaults | parameters, tmp_path / f"{namespace[1:]}.log", params_file)
         try:
             publisher = Camera(graph, bridge, camera)
         except TimeoutError as error:
@@ -265,3 +269,15 @@ def test_a_bad_parameter_stops_the_node_with_its_name(graph, start, tmp_path):
     assert bridge.process.wait(timeout=30) == 2
     bridge.stop()
     assert "vgn-ros: threshold" in bridge.text()
+
+
+def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn):
+    """docs/ros2.md's parameters file, with the test's service and session on top."""
+    session_id = f"ros-{uuid.uuid4().hex}"
+    bridge, publisher = start(_camera(scene), PARAMETERS_FILE, service_url=service.url, session_id=session_id)
+    publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at=10.0)
+    graph.spin_until(lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused")
+    workspace = vgn.session(session_id).workspace
+    assert workspace.pose.position == [0.45, -0.15, -0.03] and workspace.size == 0.30
+    answer = graph.call(bridge.topic("plan"))
+    assert answer.success and "grasps from 1 fused frames" in answer.message

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -190,3 +192,9 @@ def test_settings_are_checked_with_the_parameter_named():
     ]:
         with pytest.raises(ValueError, match=words):
             settings_from(_parameters(**changes))
+
+
+def test_the_page_names_every_parameter():
+    page = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
+    missing = [name for name in PARAMETERS if f"`{name}`" not in page]
+    assert not missing, f"docs/ros2.md does not describe {missing}"
