@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from pydantic import ValidationError
-from rclpy.exceptions import ParameterUninitializedException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.parameter import Parameter
 
 from client.connect import is_grpc_url
@@ -70,6 +70,13 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     ),
 }
 
+#: Parameters that are one number: declared so that an integer is taken for it too.
+NUMBERS = frozenset(
+    name
+    for name, (default, _) in PARAMETERS.items()
+    if isinstance(default, float) or default is Parameter.Type.DOUBLE
+)
+
 
 @dataclass(frozen=True)
 class Settings:
@@ -93,11 +100,18 @@ class Settings:
 
 
 def declare(node: Node) -> None:
-    """Declare every parameter of ``PARAMETERS`` on ``node``."""
+    """Declare every parameter of ``PARAMETERS`` on ``node``; ``ValueError`` names one given a
+    value of the wrong type. Numbers take integers too: ``-p wait:=1`` means 1.0."""
     from rcl_interfaces.msg import ParameterDescriptor
 
     for name, (default, description) in PARAMETERS.items():
-        node.declare_parameter(name, default, ParameterDescriptor(description=description))
+        number = name in NUMBERS
+        descriptor = ParameterDescriptor(description=description, dynamic_typing=number)
+        value = None if default is Parameter.Type.DOUBLE else default
+        try:
+            node.declare_parameter(name, value, descriptor)
+        except ParameterException as error:
+            raise ValueError(f"parameter {name}: {error}") from None
 
 
 def _value(node: Node, name: str) -> Any:
@@ -110,6 +124,11 @@ def _value(node: Node, name: str) -> Any:
 def read(node: Node) -> Settings:
     """The declared parameters as ``Settings``; ``ValueError`` names the parameter that is wrong."""
     values = {name: _value(node, name) for name in PARAMETERS}
+    for name in NUMBERS:
+        value = values[name]
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+        values[name] = None if value is None else float(value)
     return settings_from(values)
 
 

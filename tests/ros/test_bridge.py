@@ -264,11 +264,22 @@ def test_an_unreachable_service_is_logged_once(graph, start, scene):
     _assert_logged_once(bridge, f"the service at {url} is unreachable")
 
 
-def test_a_bad_parameter_stops_the_node_with_its_name(graph, start, tmp_path):
-    bridge = Bridge("/vgn_test_bad", {"threshold": 2.0}, tmp_path / "bad.log")
+@pytest.mark.parametrize(
+    ("parameter", "value", "words"),
+    [
+        ("threshold", 2.0, "vgn-ros: threshold: Input should be less than or equal to 1"),
+        (
+            "max_grasps",
+            "many",
+            "vgn-ros: parameter max_grasps: Trying to set parameter 'max_grasps' to 'many'",
+        ),
+    ],
+)
+def test_a_bad_parameter_stops_the_node_with_its_name(parameter, value, words, graph, tmp_path):
+    bridge = Bridge("/vgn_test_bad", {parameter: value}, tmp_path / "bad.log")
     assert bridge.process.wait(timeout=30) == 2
     bridge.stop()
-    assert "vgn-ros: threshold" in bridge.text()
+    assert words in bridge.text()
 
 
 def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn):
