@@ -22,7 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     rclpy.init(args=sys.argv if argv is None else argv)
     try:
         node = BridgeNode()
-    except ValueError as error:
+    except (ValueError, ImportError) as error:  # a bad parameter; grpc:// without the grpc extra
         print(f"vgn-ros: {error}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2

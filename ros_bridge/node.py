@@ -12,7 +12,7 @@ from typing import Any
 import httpx
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Float32MultiArray
 from std_srvs.srv import Trigger
@@ -33,6 +33,11 @@ IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "depth/image_rect", "depth/camera_info", "
 #: The client's rebuilding of a session lost with a replica, kept short: the node fuses on its one
 #: thread, and a camera streams on while a call waits, so a frame is better refused than late.
 REPLAY = Replay(attempts=2)
+#: The last plan stays with its topics: a subscriber asking for transient-local durability (RViz,
+#: a pick that starts later) gets it on joining, and any other gets the next one.
+LATCHED = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
 #: How often frames waiting for their camera info or pose are looked at again (s).
 POLL_PERIOD = 0.05
 
@@ -60,9 +65,9 @@ class BridgeNode(Node):
             camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(Image, IMAGE_TOPIC, self._on_image, camera_qos)
         self.create_subscription(CameraInfo, INFO_TOPIC, self._on_info, camera_qos)
-        self._grasps = self.create_publisher(PoseArray, "~/grasps", 1)
-        self._scores = self.create_publisher(Float32MultiArray, "~/grasp_scores", 1)
-        self._markers = self.create_publisher(MarkerArray, "~/grasp_markers", 1)
+        self._grasps = self.create_publisher(PoseArray, "~/grasps", LATCHED)
+        self._scores = self.create_publisher(Float32MultiArray, "~/grasp_scores", LATCHED)
+        self._markers = self.create_publisher(MarkerArray, "~/grasp_markers", LATCHED)
         self.create_service(Trigger, "~/plan", self._plan)
         self.create_service(Trigger, "~/reset", self._reset)
         self.create_service(Trigger, "~/status", self._report_status)
