@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -198,3 +199,43 @@ def test_the_page_names_every_parameter():
     page = (Path(__file__).resolve().parents[2] / "docs" / "ros2.md").read_text()
     missing = [name for name in PARAMETERS if f"`{name}`" not in page]
     assert not missing, f"docs/ros2.md does not describe {missing}"
+
+
+class _FakeTf2:
+    """Stands in for tf2_ros, which has no wheel: a buffer holding transforms by stamp."""
+
+    class TransformException(Exception):
+        pass
+
+    def __init__(self, stamps: list[float]) -> None:
+        tf2 = self
+
+        class Buffer:
+            def lookup_transform(self, target, source, time):
+                wanted = time.nanoseconds * 1e-9
+                if not stamps or (wanted and wanted not in stamps):
+                    raise tf2.TransformException(f"no {target} <- {source} at {wanted}")
+                found = TransformStamped()
+                found.header.frame_id, found.child_frame_id = target, source
+                found.header.stamp = make.stamp(wanted or max(stamps))
+                found.transform.translation.x, found.transform.rotation.w = wanted or max(stamps), 1.0
+                return found
+
+        self.Buffer = Buffer
+        self.TransformListener = lambda buffer, node: None
+
+
+def test_tf_poses_take_the_transform_at_the_stamp_or_the_newest_within_the_tolerance(monkeypatch):
+    from ros_bridge.poses import TfPoses
+
+    monkeypatch.setitem(sys.modules, "tf2_ros", _FakeTf2([5.0, 6.0]))
+    poses = TfPoses(None, "world", tolerance=0.05)
+    assert poses.at(5.0, "camera_optical").position[0] == 5.0
+    assert poses.at(6.03, "camera_optical").position[0] == 6.0, "the newest, 0.03 s before the frame"
+    with pytest.raises(Waiting, match="the newest transform world <- camera_optical in TF is 1.000 s older"):
+        poses.at(7.0, "camera_optical")
+    with pytest.raises(Refused, match="no header.frame_id"):
+        poses.at(5.0, "")
+    monkeypatch.setitem(sys.modules, "tf2_ros", _FakeTf2([]))
+    with pytest.raises(Waiting, match="no transform world <- camera_optical in TF"):
+        TfPoses(None, "world", tolerance=0.05).at(5.0, "camera_optical")
