@@ -239,3 +239,15 @@ def test_tf_poses_take_the_transform_at_the_stamp_or_the_newest_within_the_toler
     monkeypatch.setitem(sys.modules, "tf2_ros", _FakeTf2([]))
     with pytest.raises(Waiting, match="no transform world <- camera_optical in TF"):
         TfPoses(None, "world", tolerance=0.05).at(5.0, "camera_optical")
+
+
+def test_a_transform_topic_gives_the_pose_of_the_frame_it_names():
+    poses = TopicPoses("/camera_transform", "world", tolerance=0.05)
+    transform = TransformStamped()
+    transform.header.frame_id, transform.child_frame_id = "world", "camera_optical"
+    transform.header.stamp = make.stamp(3.0)
+    transform.transform.translation.z, transform.transform.rotation.w = 0.7, 1.0
+    poses.add(transform)
+    assert poses.at(3.0, "camera_optical").position == [0.0, 0.0, 0.7]
+    with pytest.raises(Refused, match="is for frame 'camera_optical', the depth image is in 'wrist_optical'"):
+        poses.at(3.0, "wrist_optical")
