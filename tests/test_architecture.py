@@ -27,7 +27,8 @@ RULES: dict[str, frozenset[str]] = {
     "service": frozenset({"client", "vgn_data"}),
     "sim_worker": frozenset({"client", "vgn_data"}),
     "training": frozenset({"client", "vgn_data", "service", "sim_worker"}),
-    "benchmarks": frozenset({"client", "vgn_data", "service", "sim_worker", "training"}),
+    "ros_bridge": frozenset({"client"}),
+    "benchmarks": frozenset({"client", "vgn_data", "service", "sim_worker", "training", "ros_bridge"}),
 }
 
 #: Modules a package names in a string to run them, not to import their code: ``vgn-client serve``

@@ -1,0 +1,7 @@
+"""``python -m ros_bridge``: the same as ``vgn-ros``."""
+
+import sys
+
+from ros_bridge.cli import main
+
+sys.exit(main())

@@ -1,0 +1,37 @@
+"""``vgn-ros``: run the bridge node until Ctrl-C (ROS arguments as usual, after ``--ros-args``)."""
+
+from __future__ import annotations
+
+import sys
+
+from client.extras import missing_extra
+from client.lifetime import end_with_parent_if_asked
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Start rclpy and spin the node; 2 with the reason for a missing extra or a bad parameter."""
+    end_with_parent_if_asked()  # started by a test or a launcher that may be killed outright
+    try:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException
+
+        from ros_bridge.node import BridgeNode
+    except ImportError as error:
+        print(missing_extra("vgn-ros", "ros", error), file=sys.stderr)
+        return 2
+    rclpy.init(args=sys.argv if argv is None else argv)
+    try:
+        node = BridgeNode()
+    except (ValueError, ImportError) as error:  # a bad parameter; grpc:// without the grpc extra
+        print(f"vgn-ros: {error}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

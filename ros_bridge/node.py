@@ -1,0 +1,217 @@
+"""The vgn-ros node: camera topics in, one service session, grasps out.
+
+It only wires topics, parameters and services to ``assemble``, ``outputs`` and the project's
+client; what a frame or a grasp becomes is decided in those plain modules.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import httpx
+from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import Float32MultiArray
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from client.connect import connect
+from client.http import NotFound, VGNError
+from client.recovery import Replay
+from client.schemas import Grasp
+from ros_bridge import outputs, settings
+from ros_bridge.assemble import Frame, FrameAssembler
+from ros_bridge.poses import FixedPose, PoseSource, TfPoses, TopicPoses
+from ros_bridge.problems import Complaints, Refused
+
+#: What a call to an unreachable or failing service raises, over HTTP and gRPC.
+SERVICE_ERRORS = (VGNError, httpx.TransportError, ConnectionError, TimeoutError)
+IMAGE_TOPIC, INFO_TOPIC, POSE_TOPIC = "depth/image_rect", "depth/camera_info", "camera_pose"
+#: The client's rebuilding of a session lost with a replica, kept short: the node fuses on its one
+#: thread, and a camera streams on while a call waits, so a frame is better refused than late.
+REPLAY = Replay(attempts=2)
+#: The last plan stays with its topics: a subscriber asking for transient-local durability (RViz,
+#: a pick that starts later) gets it on joining, and any other gets the next one.
+LATCHED = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
+#: How often frames waiting for their camera info or pose are looked at again (s).
+POLL_PERIOD = 0.05
+
+
+class BridgeNode(Node):
+    """Fuses each depth frame into one service session; ``~/plan`` publishes the ranked grasps,
+    ``~/reset`` empties the session, ``~/status`` says what the bridge has. ``ValueError`` at
+    construction names a bad parameter."""
+
+    def __init__(self, name: str = "vgn_bridge", **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        settings.declare(self)
+        self.settings = settings.read(self)
+        self.counts = {"received": 0, "fused": 0, "refused": 0}
+        self._complaints = Complaints(self.get_logger().warning)
+        self._client = connect(
+            self.settings.service_url, self.settings.api_key, self.settings.timeout, REPLAY
+        )
+        self._session: str | None = None
+        self._topic_poses: TopicPoses | None = None
+        info_topic = self.resolve_topic_name(INFO_TOPIC)
+        self._frames = FrameAssembler(self._pose_source(), info_topic, self.settings.wait)
+        camera_qos = qos_profile_sensor_data
+        if self.settings.reliable:
+            camera_qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(Image, IMAGE_TOPIC, self._on_image, camera_qos)
+        self.create_subscription(CameraInfo, INFO_TOPIC, self._on_info, camera_qos)
+        self._grasps = self.create_publisher(PoseArray, "~/grasps", LATCHED)
+        self._scores = self.create_publisher(Float32MultiArray, "~/grasp_scores", LATCHED)
+        self._markers = self.create_publisher(MarkerArray, "~/grasp_markers", LATCHED)
+        self.create_service(Trigger, "~/plan", self._plan)
+        self.create_service(Trigger, "~/reset", self._reset)
+        self.create_service(Trigger, "~/status", self._report_status)
+        self.create_timer(POLL_PERIOD, self._poll)
+        self.get_logger().info(
+            f"fusing {self.resolve_topic_name(IMAGE_TOPIC)} into a session on {self.settings.service_url} "
+            f"(camera pose from {self.settings.pose_source})"
+        )
+
+    def _pose_source(self) -> PoseSource:
+        s = self.settings
+        if s.pose_source == "fixed":
+            assert s.camera_pose is not None
+            return FixedPose(s.camera_pose)
+        if s.pose_source == "tf":
+            return TfPoses(self, s.world_frame, s.pose_tolerance)
+        topic = self.resolve_topic_name(POSE_TOPIC)
+        self._topic_poses = TopicPoses(topic, s.world_frame, s.pose_tolerance)
+        kind = PoseStamped if s.pose_type == "PoseStamped" else TransformStamped
+        self.create_subscription(kind, POSE_TOPIC, self._on_pose, 50)
+        return self._topic_poses
+
+    # Camera topics.
+
+    def _on_info(self, msg: CameraInfo) -> None:
+        self._frames.info = msg
+        self._poll()
+
+    def _on_pose(self, msg: PoseStamped | TransformStamped) -> None:
+        assert self._topic_poses is not None
+        try:
+            self._topic_poses.add(msg)
+        except Refused as problem:
+            self._complaints.report(problem)
+            return
+        self._poll()
+
+    def _on_image(self, msg: Image) -> None:
+        self.counts["received"] += 1
+        self._handle(self._frames.add(msg, time.monotonic()))
+
+    def _poll(self) -> None:
+        self._handle(self._frames.poll(time.monotonic()))
+
+    def _handle(self, decided: list[Frame | Refused]) -> None:
+        for item in decided:
+            if isinstance(item, Frame):
+                self._fuse(item)
+            else:
+                self._refuse(item)
+
+    def _refuse(self, problem: Refused) -> None:
+        self.counts["refused"] += 1
+        self._complaints.report(problem)
+
+    def _fuse(self, frame: Frame) -> None:
+        s = self.settings
+        try:
+            session = self._session_id()
+            self._client.add_frame(
+                session, frame.depth, frame.pose, frame.intrinsics, s.depth_scale, s.max_depth
+            )
+        except SERVICE_ERRORS as error:
+            self._refuse(self._service_problem(error, "did not fuse the frame"))
+            return
+        self.counts["fused"] += 1
+        self._complaints.clear()
+
+    # The service.
+
+    def _session_id(self) -> str:
+        """The session frames go to, opened on first use (the service may come up after the node)."""
+        if self._session is None:
+            s = self.settings
+            opened = self._client.create_session(session_id=s.session_id, workspace=s.workspace)
+            self._session = opened.session_id
+            self.get_logger().info(f"opened session {self._session} on {s.service_url}")
+        return self._session
+
+    def _service_problem(self, error: Exception, what: str) -> Refused:
+        url = self.settings.service_url
+        if isinstance(error, NotFound) and self._session is not None:
+            lost, self._session = self._session, None
+            return Refused(
+                "session", f"session {lost} is gone from {url} (expired or deleted): a new one opens"
+            )
+        if isinstance(error, httpx.TransportError | ConnectionError | TimeoutError):
+            return Refused(
+                "service", f"the service at {url} is unreachable ({type(error).__name__}: {error})"
+            )
+        return Refused("service", f"the service at {url} {what}: {type(error).__name__}: {error}")
+
+    def _counts(self) -> str:
+        c = self.counts
+        return f"frames: {c['received']} received, {c['fused']} fused, {c['refused']} refused"
+
+    def _report_status(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """What the bridge has: its session, its counts, the camera info and the poses it holds."""
+        info = self._frames.info
+        camera = f"{info.width}x{info.height}" if info is not None else "none yet"
+        poses = (
+            f"{len(self._topic_poses)} kept" if self._topic_poses is not None else self.settings.pose_source
+        )
+        session = self._session or "not opened yet"
+        response.success = True
+        response.message = (
+            f"session: {session}; {self._counts()}; camera info: {camera}; camera poses: {poses}"
+        )
+        return response
+
+    def _plan(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        try:
+            result = self._client.grasps(self._session_id(), **self.settings.grasp_options)
+        except SERVICE_ERRORS as error:
+            problem = self._service_problem(error, "did not plan")
+            self._complaints.report(problem)
+            response.success, response.message = False, f"{problem}; {self._counts()}"
+            return response
+        self._publish(result.grasps)
+        response.success = True
+        response.message = (
+            f"{len(result.grasps)} grasps from {result.frame_count} fused frames "
+            f"(threshold {result.threshold:.2f}); {self._counts()}"
+        )
+        return response
+
+    def _reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        try:
+            self._client.reset_session(self._session_id())
+        except SERVICE_ERRORS as error:
+            problem = self._service_problem(error, "did not reset the session")
+            self._complaints.report(problem)
+            response.success, response.message = False, str(problem)
+            return response
+        self._publish([])
+        response.success, response.message = True, f"session {self._session} emptied"
+        return response
+
+    def _publish(self, grasps: list[Grasp]) -> None:
+        frame, stamp = self.settings.world_frame, self.get_clock().now().to_msg()
+        self._grasps.publish(outputs.pose_array(grasps, frame, stamp))
+        self._scores.publish(outputs.scores(grasps))
+        self._markers.publish(outputs.markers(grasps, frame, stamp))
+
+    def close(self) -> None:
+        """Close the connection to the service (the session stays on it, to plan from again)."""
+        self._client.close()

@@ -1,0 +1,294 @@
+"""vgn-ros on a real ROS 2 graph: a test node publishes a camera's Image, CameraInfo and pose,
+the bridge runs as its own process and fuses into a real service on loopback (docs/ros2.md).
+
+The graph is private: a random ROS_DOMAIN_ID and discovery kept on this machine.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
+
+from geometry_msgs.msg import PoseArray, PoseStamped  # noqa: E402
+from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
+from std_msgs.msg import Float32MultiArray  # noqa: E402
+
+from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
+from client.embedded import EmbeddedService, free_port  # noqa: E402
+from tests.ros import ros_messages as make  # noqa: E402
+from tests.ros.graph import RELIABLE, Bridge, Graph, private_domain  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLE = ROOT / "examples" / "sample_scene.npz"
+PARAMETERS_FILE = ROOT / "examples" / "ros2" / "vgn_bridge.yaml"
+GRASP_OPTIONS = {"max_grasps": 5}
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedService]:
+    """The packaged model behind HTTP and gRPC, as `vgn-client serve` runs it."""
+    log = tmp_path_factory.mktemp("ros") / "service.log"
+    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP")
+    with EmbeddedService(env={"VGN_TORCH_THREADS": "1"}, unset=unset, log_path=log, grpc=True) as running:
+        yield running
+
+
+@pytest.fixture(scope="module")
+def graph() -> Iterator[Graph]:
+    with private_domain():
+        graph = Graph()
+        try:
+            yield graph
+        finally:
+            graph.close()
+
+
+@pytest.fixture(scope="module")
+def scene() -> dict[str, np.ndarray]:
+    return dict(np.load(SAMPLE))
+
+
+@pytest.fixture
+def vgn(service: EmbeddedService) -> Iterator[VGNClient]:
+    with VGNClient(service.url) as client:
+        yield client
+
+
+class Camera:
+    """The robot's side: publishers for a bridge's camera topics."""
+
+    def __init__(self, graph: Graph, bridge: Bridge, camera: Intrinsics | None) -> None:
+        self.graph, self.bridge = graph, bridge
+        node = graph.node
+        self.image = node.create_publisher(Image, bridge.topic("depth/image_rect"), RELIABLE)
+        self.info = node.create_publisher(CameraInfo, bridge.topic("depth/camera_info"), RELIABLE)
+        self.pose = node.create_publisher(PoseStamped, bridge.topic("camera_pose"), RELIABLE)
+        graph.spin_until(
+            lambda: all(p.get_subscription_count() for p in (self.image, self.info, self.pose)),
+            30,
+            "the bridge did not subscribe to the camera topics",
+        )
+
+        # Each side of a topic matches the other on its own, and the bridge drops what a publisher
+        # sends before it has matched it: send camera info (if any) and a pose stamped long before
+        # the test's frames until the bridge says it holds them, as a camera streams them.
+        def holds_them() -> bool:
+            if camera is not None:
+                self.info.publish(make.camera_info(camera, 0.0))
+            self.pose.publish(make.pose_stamped(np.eye(4), 0.0))
+            graph.spin_for(0.05)
+            status = graph.call(bridge.topic("status")).message
+            return "camera poses: 0 kept" not in status and (
+                camera is None or "camera info: none" not in status
+            )
+
+        graph.spin_until(holds_them, 30, "the bridge did not receive camera info and poses")
+
+    def publish(
+        self, depth: np.ndarray, matrix: np.ndarray, camera: Intrinsics | None, at: float, **image
+    ) -> None:
+        """Pose and camera info first, then the image, all stamped ``at``."""
+        self.pose.publish(make.pose_stamped(matrix, at))
+        if camera is not None:
+            self.info.publish(make.camera_info(camera, at))
+        self.image.publish(make.image(depth, at, **image))
+
+    def close(self) -> None:
+        for publisher in (self.image, self.info, self.pose):
+            self.graph.node.destroy_publisher(publisher)
+
+
+@pytest.fixture
+def start(graph: Graph, tmp_path: Path) -> Iterator:
+    """Start a bridge with parameters (``wait`` short, the pose from the topic); yields a camera for it."""
+    running: list[tuple[Bridge, Camera]] = []
+
+    def start(
+        camera: Intrinsics | None, params_file: Path | None = None, **parameters: object
+    ) -> tuple[Bridge, Camera]:
+        namespace = f"/vgn_test_{uuid.uuid4().hex[:8]}"
+        defaults = {"pose_source": "topic", "reliable": True, "wait": 0.3, "timeout": 5.0}
+        bridge = Bridge(namespace, defaults | parameters, tmp_path / f"{namespace[1:]}.log", params_file)
+        try:
+            publisher = Camera(graph, bridge, camera)
+        except TimeoutError as error:
+            bridge.stop()
+            raise AssertionError(f"{error}:\n{bridge.text()}") from None
+        running.append((bridge, publisher))
+        return bridge, publisher
+
+    yield start
+    for bridge, camera in running:
+        camera.close()
+        bridge.stop()
+
+
+def _camera(scene: dict[str, np.ndarray]) -> Intrinsics:
+    width, height, fx, fy, cx, cy = scene["intrinsics"]
+    return Intrinsics(width=int(width), height=int(height), fx=fx, fy=fy, cx=cx, cy=cy)
+
+
+def _workspace(scene: dict[str, np.ndarray]) -> Workspace:
+    return Workspace(
+        size=0.30, resolution=40, pose=Pose(position=[0.0, 0.0, float(scene["table_height"]) - 0.05])
+    )
+
+
+def _frames(vgn: VGNClient, session_id: str) -> int:
+    try:
+        return vgn.session(session_id).frame_count
+    except NotFound:
+        return 0
+
+
+@pytest.mark.parametrize("encoding", ["16UC1", "32FC1"])
+def test_published_frames_give_the_grasps_the_python_client_gets(encoding, service, graph, start, scene, vgn):
+    camera, workspace = _camera(scene), _workspace(scene)
+    depths = (
+        list(scene["depth_mm"])
+        if encoding == "16UC1"
+        else [(d / 1000.0).astype(np.float32) for d in scene["depth_mm"]]
+    )
+    # 16UC1 over HTTP, 32FC1 over gRPC: the bridge takes either URL.
+    url = service.url if encoding == "16UC1" else service.grpc_url
+    session_id = f"ros-{uuid.uuid4().hex}"
+    bridge, publisher = start(
+        camera,
+        wait=5.0,  # a loaded machine may deliver a pose after its image: a frame waits rather than being refused
+        service_url=url,
+        session_id=session_id,
+        **{"workspace.position": list(workspace.pose.position)},
+        **GRASP_OPTIONS,
+    )
+    got: dict[str, object] = {}
+    graph.node.create_subscription(PoseArray, bridge.topic("grasps"), lambda m: got.update(poses=m), RELIABLE)
+    graph.node.create_subscription(
+        Float32MultiArray, bridge.topic("grasp_scores"), lambda m: got.update(scores=m), RELIABLE
+    )
+    for index, (depth, pose) in enumerate(zip(depths, scene["camera_poses"], strict=True)):
+        publisher.publish(depth, pose, camera, at=1000.0 + index)
+        graph.spin_until(
+            lambda n=index + 1: _frames(vgn, session_id) == n, 30, f"frame {index} was not fused"
+        )
+    answer = graph.call(bridge.topic("plan"))
+    assert answer.success, answer.message
+    graph.spin_until(lambda: "poses" in got and "scores" in got, 10, "no grasps were published")
+
+    with connect(url) as python:
+        own = python.create_session(workspace=workspace).session_id
+        for depth, pose in zip(depths, scene["camera_poses"], strict=True):
+            python.add_frame(own, depth, pose, camera)
+        expected = python.grasps(own, **GRASP_OPTIONS).grasps
+        python.delete_session(own)
+    assert expected, "the sample scene has grasps"
+    poses = got["poses"]
+    assert poses.header.frame_id == "world"
+    positions = np.array([[p.position.x, p.position.y, p.position.z] for p in poses.poses])
+    orientations = np.array(
+        [[p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w] for p in poses.poses]
+    )
+    assert positions.shape == (len(expected), 3)
+    assert np.abs(positions - [g.position for g in expected]).max() < 1e-6
+    assert np.abs(orientations - [g.orientation for g in expected]).max() < 1e-6
+    scores = np.reshape(got["scores"].data, (-1, 2))
+    assert np.allclose(scores, [[g.quality, g.width] for g in expected], atol=1e-6)
+    assert f"{len(expected)} grasps from 4 fused frames" in answer.message
+    assert "4 received, 4 fused, 0 refused" in answer.message
+
+
+def _refused_twice(graph: Graph, bridge: Bridge) -> str:
+    """The status once the bridge has refused both frames (it counts them)."""
+    return graph.spin_until(
+        lambda: (
+            (answer := graph.call(bridge.topic("status")))
+            and "2 refused" in answer.message
+            and answer.message
+        ),
+        20,
+        f"the bridge did not refuse both frames:\n{bridge.text()}",
+    )
+
+
+def _assert_logged_once(bridge: Bridge, words: str) -> None:
+    text = bridge.text()
+    assert text.count(words) == 1, f"{words!r} should be logged once:\n{text}"
+
+
+@pytest.mark.parametrize(
+    ("problem", "words"),
+    [
+        (
+            "encoding",
+            "depth image encoding 'rgb8' is not supported: publish 16UC1 (millimetres) or 32FC1 (metres)",
+        ),
+        ("camera_info", "no CameraInfo received on /"),
+        ("stale_pose", "s older than the frame (pose_tolerance 0.05 s)"),
+    ],
+)
+def test_bad_input_is_logged_once_and_nothing_is_fused(problem, words, service, graph, start, scene, vgn):
+    session_id = f"ros-{uuid.uuid4().hex}"
+    camera = None if problem == "camera_info" else _camera(scene)
+    bridge, publisher = start(camera, service_url=service.url, session_id=session_id, pose_tolerance=0.05)
+    depth, pose = scene["depth_mm"][0], scene["camera_poses"][0]
+    for at in (10.0, 11.0):
+        if problem == "encoding":
+            publisher.publish(depth, pose, camera, at, encoding="rgb8")
+        elif problem == "stale_pose":
+            publisher.pose.publish(make.pose_stamped(pose, at - 2.0))
+            publisher.info.publish(make.camera_info(camera, at))
+            publisher.image.publish(make.image(depth, at))
+        else:
+            publisher.publish(depth, pose, camera, at)
+    message = _refused_twice(graph, bridge)
+    assert "2 received, 0 fused, 2 refused" in message
+    _assert_logged_once(bridge, words)
+    assert _frames(vgn, session_id) == 0
+
+
+def test_an_unreachable_service_is_logged_once(graph, start, scene):
+    url = f"http://127.0.0.1:{free_port()}"
+    bridge, publisher = start(_camera(scene), service_url=url)
+    for at in (10.0, 11.0):
+        publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at)
+    assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
+    answer = graph.call(bridge.topic("plan"))
+    assert not answer.success and answer.message.startswith(
+        f"the service at {url} is unreachable (ConnectError"
+    )
+    _assert_logged_once(bridge, f"the service at {url} is unreachable")
+
+
+@pytest.mark.parametrize(
+    ("parameter", "value", "words"),
+    [
+        ("threshold", 2.0, "vgn-ros: threshold: Input should be less than or equal to 1"),
+        (
+            "max_grasps",
+            "many",
+            "vgn-ros: parameter max_grasps: Trying to set parameter 'max_grasps' to 'many'",
+        ),
+    ],
+)
+def test_a_bad_parameter_stops_the_node_with_its_name(parameter, value, words, graph, tmp_path):
+    bridge = Bridge("/vgn_test_bad", {parameter: value}, tmp_path / "bad.log")
+    assert bridge.process.wait(timeout=30) == 2
+    bridge.stop()
+    assert words in bridge.text()
+
+
+def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn):
+    """docs/ros2.md's parameters file, with the test's service and session on top."""
+    session_id = f"ros-{uuid.uuid4().hex}"
+    bridge, publisher = start(_camera(scene), PARAMETERS_FILE, service_url=service.url, session_id=session_id)
+    publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at=10.0)
+    graph.spin_until(lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused")
+    workspace = vgn.session(session_id).workspace
+    assert workspace.pose.position == [0.45, -0.15, -0.03] and workspace.size == 0.30
+    answer = graph.call(bridge.topic("plan"))
+    assert answer.success and "grasps from 1 fused frames" in answer.message
