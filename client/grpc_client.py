@@ -194,9 +194,10 @@ class GRPCClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
         decay: float | None = None,
+        gripper: str | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
-        spec = session_spec(session_id, workspace, intrinsics, decay)
+        spec = session_spec(session_id, workspace, intrinsics, decay, gripper)
         return self._journal.open(self._transport, Rebuild(spec, None, 0, []))
 
     def sessions(self) -> SessionList:
@@ -389,6 +390,7 @@ class _Transport:
             workspace=convert.workspace_message(spec.workspace),
             intrinsics=convert.intrinsics_message(spec.intrinsics),
             decay=spec.decay,
+            gripper=spec.gripper,
         )
         return self._client._call(stub.CreateSession, request, convert.session_info, spec.session_id)
 

@@ -78,7 +78,7 @@ def workspace_dict(message: pb.Workspace) -> dict[str, Any]:
 
 def session_create_dict(message: pb.CreateSessionRequest) -> dict[str, Any]:
     """A ``SessionCreate`` dict of the fields the request sets."""
-    data = optional_fields(message, ("session_id", "decay"))
+    data = optional_fields(message, ("session_id", "decay", "gripper"))
     if message.HasField("workspace"):
         data["workspace"] = workspace_dict(message.workspace)
     if message.HasField("intrinsics"):
@@ -152,6 +152,7 @@ def session_message(info: SessionInfo) -> pb.Session:
         last_used_at=info.last_used_at,
         expires_at=info.expires_at,
         decay=info.decay,
+        gripper=info.gripper,
     )
 
 
@@ -223,6 +224,7 @@ def session_info(message: pb.Session) -> SessionInfo:
         last_used_at=message.last_used_at,
         expires_at=message.expires_at,
         decay=message.decay if message.HasField("decay") else None,
+        **({"gripper": message.gripper} if message.gripper else {}),
     )
 
 
