@@ -31,6 +31,7 @@ from client.schemas import (
     SESSION_ID_HEADER,
     FrameResult,
     GraspResult,
+    GripperList,
     Intrinsics,
     ModelInfo,
     Pose,
@@ -170,6 +171,10 @@ class GRPCClient:
     def model(self) -> ModelInfo:
         """As ``VGNClient.model``."""
         return self._call(self._stub.GetModelInfo, pb.GetModelInfoRequest(), convert.model_info)
+
+    def grippers(self) -> GripperList:
+        """As ``VGNClient.grippers``."""
+        return self._call(self._stub.ListGrippers, pb.ListGrippersRequest(), convert.gripper_list)
 
     def metrics(self) -> str:
         """Not over gRPC: metrics are Prometheus text, served by the HTTP front end only."""

@@ -291,6 +291,34 @@ class GetModelInfoRequest(_message.Message):
     __slots__ = ()
     def __init__(self) -> None: ...
 
+class ListGrippersRequest(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class GripperInfo(_message.Message):
+    __slots__ = ("name", "version", "description", "max_opening", "finger_depth", "network")
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    VERSION_FIELD_NUMBER: _ClassVar[int]
+    DESCRIPTION_FIELD_NUMBER: _ClassVar[int]
+    MAX_OPENING_FIELD_NUMBER: _ClassVar[int]
+    FINGER_DEPTH_FIELD_NUMBER: _ClassVar[int]
+    NETWORK_FIELD_NUMBER: _ClassVar[int]
+    name: str
+    version: str
+    description: str
+    max_opening: float
+    finger_depth: float
+    network: str
+    def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., description: _Optional[str] = ..., max_opening: _Optional[float] = ..., finger_depth: _Optional[float] = ..., network: _Optional[str] = ...) -> None: ...
+
+class GripperList(_message.Message):
+    __slots__ = ("grippers", "default")
+    GRIPPERS_FIELD_NUMBER: _ClassVar[int]
+    DEFAULT_FIELD_NUMBER: _ClassVar[int]
+    grippers: _containers.RepeatedCompositeFieldContainer[GripperInfo]
+    default: str
+    def __init__(self, grippers: _Optional[_Iterable[_Union[GripperInfo, _Mapping]]] = ..., default: _Optional[str] = ...) -> None: ...
+
 class ModelInfo(_message.Message):
     __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json")
     class ConventionsEntry(_message.Message):

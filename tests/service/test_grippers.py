@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from client import BadRequest
 from client.gripper_description import BUILTIN_DIR, GripperDescription, parse_gripper
 from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
-from client.schemas import GraspResult, SessionCreate, SessionInfo
+from client.grpc_client import GRPCClient
+from client.schemas import GraspResult, GripperList, SessionCreate, SessionInfo
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grpc.server import build_server
@@ -119,6 +121,7 @@ def fuse(http: TestClient, session_id: str) -> None:
 def test_the_service_lists_its_hands_and_their_networks(http, core):
     listed = http.get("/grippers")
     assert listed.status_code == 200
+    assert GripperList.model_validate(listed.json()) == core.grippers()
     body = listed.json()
     assert body["default"] == "franka"
     networks = {g["name"]: g["network"] for g in body["grippers"]}
@@ -194,6 +197,11 @@ def test_grpc_sessions_name_their_hand(core):
                 with pytest.raises(grpc.RpcError) as caught:
                     stub.CreateSession(pb.CreateSessionRequest(gripper=name))
                 assert caught.value.code() == code and "franka" in caught.value.details()
+        with GRPCClient(f"grpc://127.0.0.1:{port}") as rpc:
+            assert rpc.grippers() == core.grippers()
+            assert rpc.create_session(gripper="narrow-jaw").gripper == "narrow-jaw"
+            with pytest.raises(BadRequest, match="hands with a network: franka, narrow-jaw"):
+                rpc.create_session(gripper="robotiq-2f85")
     finally:
         server.stop(None)
 
