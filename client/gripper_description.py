@@ -147,7 +147,9 @@ class GripperDescription(_Part):
             raise ValueError(
                 f"the pad's tip (z = {pz + hz:.6g}) must be at the finger depth ({self.finger_depth})"
             )
-        if abs(py - hy) > TOLERANCE or pad.tilt:
+        if pad.tilt:
+            raise ValueError(f"the pad {pad.name!r} must not be tilted: its inner face closes flat")
+        if abs(py - hy) > TOLERANCE:
             raise ValueError(f"the pad's inner face (y = {py - hy:.6g}) must lie on the closing plane y = 0")
         if any(abs(x - px) > hx for x in self.pad.contact_x) or any(
             abs(z - pz) > hz for z in self.pad.contact_z

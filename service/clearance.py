@@ -77,7 +77,8 @@ def hand_boxes(
 @functools.lru_cache(maxsize=16)
 def _hand_boxes(hand: GripperDescription, opening: float, margin: float) -> tuple[np.ndarray, ...]:
     half_opening = 0.5 * opening
-    centres, rotations, halves = [hand.palm.centre], [np.eye(3)], [hand.palm.half]
+    palm = hand.palm
+    centres, rotations, halves = [palm.centre], [Rotation.from_euler("x", palm.tilt).as_matrix()], [palm.half]
     for side in (1.0, -1.0):
         for box in hand.fingers:
             x, y, z = box.centre

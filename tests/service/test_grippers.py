@@ -22,6 +22,7 @@ from client.schemas import GraspResult, GripperList, SessionCreate, SessionInfo
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grpc.server import build_server
+from service.hands import Hands
 from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
@@ -212,3 +213,17 @@ def test_a_snapshot_keeps_the_hand(core):
     core.delete_session(info.session_id)
     assert core.import_session(data).gripper == "narrow-jaw"
     core.delete_session(info.session_id)
+
+
+def test_the_operator_s_files_are_checked_when_the_service_starts(tmp_path):
+    taken = tmp_path / "taken.json"
+    taken.write_text(json.dumps(FRANKA))
+    with pytest.raises(ValueError, match="the gripper name 'franka' is taken"):
+        Hands.build([taken])
+    broken = tmp_path / "broken.json"
+    broken.write_text(json.dumps(variant("broken", lambda data: data.pop("palm"))))
+    with pytest.raises(ValueError, match="broken.json: palm: Field required"):
+        Hands.build([broken])
+    with pytest.raises(ValueError, match="VGN_NETWORK_GRIPPERS names unknown hands \\['schunk'\\]"):
+        Hands.build([], ["franka", "schunk"])
+    assert Hands.build().served == {"franka"}
