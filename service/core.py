@@ -101,7 +101,7 @@ class PlanningService:
 
     def grippers(self) -> GripperList:
         """The hands this service knows, each with the network that serves it (or none)."""
-        network = self.planner.model_id or "vgn"
+        network = self.planner.model_id or "vgn (no weights loaded yet)"
         return GripperList(
             grippers=[
                 GripperInfo(
@@ -111,7 +111,7 @@ class PlanningService:
                     max_opening=hand.max_opening,
                     finger_depth=hand.finger_depth,
                     network=network if name in self.hands.served else None,
-                )  # fmt: skip
+                )
                 for name, hand in sorted(self.hands.known.items())
             ],
             default=DEFAULT_GRIPPER,
