@@ -11,6 +11,8 @@ import inspect
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from client.gripper_description import default_gripper
+
 #: How far a quaternion's norm may stray from 1 before it is refused rather than trusted.
 UNIT_QUATERNION_TOLERANCE = 1e-3
 #: How far ``RᵀR`` may stray from the identity before a matrix counts as non-rigid.
@@ -99,23 +101,23 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0
     return pose
 
 
-#: Finger length along the approach of VGN's gripper and ours (metres); used to draw grasps.
-FINGER_DEPTH = 0.05
 #: A stem drawn behind the palm so the approach direction reads at a glance (metres).
 STEM_LENGTH = 0.03
 
 
-def gripper_outline(grasp_pose: np.ndarray, width: float) -> np.ndarray:
+def gripper_outline(grasp_pose: np.ndarray, width: float, finger_depth: float | None = None) -> np.ndarray:
     """(7, 3) world points outlining a parallel-jaw grasp, for drawing: finger tip, palm, palm,
     finger tip (one stroke), a NaN row (pen up), then the stem from the palm backwards. Grasp
-    frame as everywhere: +z approach, y the closing axis, origin between the finger bases."""
+    frame as everywhere: +z approach, y the closing axis, origin between the finger bases; the
+    fingers are ``finger_depth`` long (m; default: the default gripper description's)."""
+    depth = default_gripper().finger_depth if finger_depth is None else finger_depth
     half = width / 2
     local = np.array(
         [
-            [0, -half, FINGER_DEPTH],
+            [0, -half, depth],
             [0, -half, 0],
             [0, half, 0],
-            [0, half, FINGER_DEPTH],
+            [0, half, depth],
             [np.nan, np.nan, np.nan],
             [0, 0, 0],
             [0, 0, -STEM_LENGTH],

@@ -31,6 +31,7 @@ from client.schemas import (
     SESSION_ID_HEADER,
     FrameResult,
     GraspResult,
+    GripperList,
     Intrinsics,
     ModelInfo,
     Pose,
@@ -171,6 +172,10 @@ class GRPCClient:
         """As ``VGNClient.model``."""
         return self._call(self._stub.GetModelInfo, pb.GetModelInfoRequest(), convert.model_info)
 
+    def grippers(self) -> GripperList:
+        """As ``VGNClient.grippers``."""
+        return self._call(self._stub.ListGrippers, pb.ListGrippersRequest(), convert.gripper_list)
+
     def metrics(self) -> str:
         """Not over gRPC: metrics are Prometheus text, served by the HTTP front end only."""
         raise NotImplementedError("Prometheus metrics are served over HTTP only: GET /metrics")
@@ -194,9 +199,10 @@ class GRPCClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
         decay: float | None = None,
+        gripper: str | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
-        spec = session_spec(session_id, workspace, intrinsics, decay)
+        spec = session_spec(session_id, workspace, intrinsics, decay, gripper)
         return self._journal.open(self._transport, Rebuild(spec, None, 0, []))
 
     def sessions(self) -> SessionList:
@@ -389,6 +395,7 @@ class _Transport:
             workspace=convert.workspace_message(spec.workspace),
             intrinsics=convert.intrinsics_message(spec.intrinsics),
             decay=spec.decay,
+            gripper=spec.gripper,
         )
         return self._client._call(stub.CreateSession, request, convert.session_info, spec.session_id)
 

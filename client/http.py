@@ -29,6 +29,7 @@ from client.schemas import (
     FrameResult,
     GraspQuery,
     GraspResult,
+    GripperList,
     Intrinsics,
     ModelInfo,
     Pose,
@@ -295,6 +296,7 @@ class Calls:
     )
     tsdf = staticmethod(lambda sid: Call("GET", f"/sessions/{sid}/tsdf", _npy).routed(sid))
     model = staticmethod(lambda: Call("GET", "/model", _model(ModelInfo)))
+    grippers = staticmethod(lambda: Call("GET", "/grippers", _model(GripperList)))
     health = staticmethod(lambda: Call("GET", "/healthz", lambda r: r.json()))
     metrics = staticmethod(lambda: Call("GET", "/metrics", lambda r: r.text))
 
@@ -304,6 +306,7 @@ def session_spec(
     workspace: Workspace | None,
     intrinsics: Intrinsics | None,
     decay: float | None = None,
+    gripper: str | None = None,
 ) -> SessionCreate:
     """A session's creation request, checked; its id the one given or one this client picks."""
     with refused_as("session", of_arguments=True):
@@ -312,6 +315,7 @@ def session_spec(
             workspace=workspace or Workspace(),
             intrinsics=intrinsics,
             decay=decay,
+            **({} if gripper is None else {"gripper": gripper}),
         )
 
 
@@ -324,6 +328,7 @@ def import_plan(snapshot: bytes, session_id: str | None) -> Rebuild:
             session_id=session_id or meta.get("session_id"),
             workspace=meta.get("workspace"),
             intrinsics=meta.get("intrinsics"),
+            **({"gripper": meta["gripper"]} if meta.get("gripper") is not None else {}),
         )
     return Rebuild(spec, snapshot, int(meta.get("frame_count") or 0), [])
 
@@ -416,6 +421,10 @@ class VGNClient:
         """Which weights the service runs, on which device, and their operating threshold."""
         return self._run(Calls.model())
 
+    def grippers(self) -> GripperList:
+        """The hands the service knows, each with the network that plans for it (or none)."""
+        return self._run(Calls.grippers())
+
     def metrics(self) -> str:
         """The Prometheus text exposition, for scraping by hand or in tests."""
         return self._run(Calls.metrics())
@@ -472,11 +481,13 @@ class VGNClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
         decay: float | None = None,
+        gripper: str | None = None,
     ) -> SessionInfo:
         """Open a session under ``session_id``, or under an id this client picks (a uuid4 hex);
         ``Conflict`` when the id is taken. With ``decay`` (0-1) the session follows a changing
-        scene: each frame first weighs the evidence of earlier frames where it sees again by it."""
-        spec = session_spec(session_id, workspace, intrinsics, decay)
+        scene: each frame first weighs the evidence of earlier frames where it sees again by it.
+        ``gripper`` names the hand it plans for (``grippers()`` lists them; default ``franka``)."""
+        spec = session_spec(session_id, workspace, intrinsics, decay, gripper)
         return self._journal.open(self._transport, Rebuild(spec, None, 0, []))
 
     def add_frame(
@@ -562,6 +573,10 @@ class AsyncVGNClient:
         """As ``VGNClient.model``."""
         return await self._run(Calls.model())
 
+    async def grippers(self) -> GripperList:
+        """As ``VGNClient.grippers``."""
+        return await self._run(Calls.grippers())
+
     async def metrics(self) -> str:
         """As ``VGNClient.metrics``."""
         return await self._run(Calls.metrics())
@@ -615,9 +630,10 @@ class AsyncVGNClient:
         workspace: Workspace | None = None,
         intrinsics: Intrinsics | None = None,
         decay: float | None = None,
+        gripper: str | None = None,
     ) -> SessionInfo:
         """As ``VGNClient.create_session``."""
-        spec = session_spec(session_id, workspace, intrinsics, decay)
+        spec = session_spec(session_id, workspace, intrinsics, decay, gripper)
         return await self._journal.aopen(self._transport, Rebuild(spec, None, 0, []))
 
     async def add_frame(

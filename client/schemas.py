@@ -21,6 +21,7 @@ from client.geometry import (
     check_unit_quaternion,
     pose_from_matrix,
 )
+from client.gripper_description import DEFAULT_GRIPPER, NAME_PATTERN
 
 Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 Quaternion = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
@@ -171,6 +172,12 @@ class SessionCreate(_Model):
         "in the voxels it sees again by this factor (what it does not see keeps its evidence); "
         "unset: every frame counts for ever (a static scene)",
     )
+    gripper: str = Field(
+        default=DEFAULT_GRIPPER,
+        pattern=NAME_PATTERN,
+        description="the hand this session plans for (GET /grippers lists them): its clearance and grip "
+        "checks measure this hand; a hand the service does not know, or that no network serves, is refused",
+    )
 
 
 class SessionInfo(_Model):
@@ -185,6 +192,7 @@ class SessionInfo(_Model):
     last_used_at: float = Field(description="unix time")
     expires_at: float = Field(description="unix time at which an idle session is dropped")
     decay: float | None = Field(default=None, description="the session's forgetting factor, if it forgets")
+    gripper: str = Field(default=DEFAULT_GRIPPER, description="the hand the session plans for")
 
 
 class SessionList(_Model):
@@ -389,6 +397,28 @@ class GraspResult(_Model):
     turn_average: bool | None = Field(
         default=None, description="vgn: whether the request was turn-averaged; null for antipodal"
     )
+
+
+class GripperInfo(_Model):
+    """A hand the service knows (its description: docs/your-gripper.md) and the network that serves it."""
+
+    name: str
+    version: str = Field(description="the label of data made with this hand")
+    description: str
+    max_opening: float = Field(description="fully open width between the pads (m)")
+    finger_depth: float = Field(
+        description="from the grasp frame's origin to the fingertips along the approach (m)"
+    )
+    network: str | None = Field(
+        description="id of the network that plans for this hand; null: none, and a session for it is refused"
+    )
+
+
+class GripperList(_Model):
+    """The hands the service knows, and the one a session that names none plans for."""
+
+    grippers: list[GripperInfo]
+    default: str
 
 
 class ModelInfo(_Model):

@@ -18,8 +18,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
-from service.clearance import MAX_OPENING, approach_is_clear, fingers_inside
+from service.clearance import approach_is_clear, fingers_inside
 from service.grip import GripConfig, GripMeasure, measure_grip
+from service.hands import active_hand
 
 #: Alternative hand poses tried for a dropped grasp, as (turn about the approach, tilt of the
 #: approach about the closing axis) in degrees and a step back along the approach in metres: turns
@@ -177,7 +178,8 @@ def _moved(
     """``grasp`` in another pose, its opening measured where the fingers met the surface."""
     width = grasp.width
     if (measure.known[row] == 1.0).all() and (measure.contact[row] == 1.0).all():
-        width = float(np.clip(MAX_OPENING - measure.reach[row].sum(), 0.0, MAX_OPENING))
+        max_opening = active_hand().max_opening
+        width = float(np.clip(max_opening - measure.reach[row].sum(), 0.0, max_opening))
     return grasp.model_copy(
         update={
             "position": position.tolist(),

@@ -5,8 +5,8 @@ opening 5 cm back along the approach and moves it straight to the grasp pose. A 
 *clear* when none of the hand's parts, swept along that path, comes near more than
 ``min_points - 1`` observed surface points; points between the fingers never count.
 
-The hand is the ``franka-v2`` collision model of ``sim_worker/assets/gripper.urdf`` (a test
-compares the two; its boxes are in :data:`PALM_HALF` and :data:`FINGER_BOXES`), every part a
+The hand is the session's gripper description (``client.gripper_description``; by default
+``franka``, whose boxes a test compares with ``sim_worker/assets/gripper.urdf``), every part a
 box in the grasp frame (docs/conventions.md), each swept box tested exactly for the points
 inside the swept hand's bounding box. The service passes the zero crossings of the session's
 coarse TSDF (``SceneVolume.surface_points``), far cheaper than the fine cloud of ``/cloud``.
@@ -20,23 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.geometry import FINGER_DEPTH
+from client.gripper_description import GripperDescription
 from client.schemas import Grasp
+from service.hands import active_hand
 
-#: The hand's fully open width (m): the executor spawns the hand open this wide.
-MAX_OPENING = 0.08
-#: How far back along the approach the open hand starts (``sim_worker.grasping.PREGRASP_DISTANCE``).
-PREGRASP_DISTANCE = 0.05
-
-#: Palm box: centre and half extents in the grasp frame (URDF ``palm`` collision box).
-PALM_CENTRE, PALM_HALF = (0.0, 0.0, -0.0345), (0.03, 0.10, 0.03)
-#: The left finger's boxes (URDF ``left_finger`` collision boxes) at joint position 0:
-#: (centre, half extents, tilt about x in radians). The right finger mirrors them in y.
-FINGER_BOXES = (
-    ((0.0, 0.0185, 0.0065), (0.011, 0.0075, 0.01), 0.0),  # base block
-    ((0.0, 0.0159, 0.0239), (0.00875, 0.0035, 0.01175), 0.5236),  # web
-    ((0.0, 0.0076, 0.04075), (0.01, 0.0076, 0.00925), 0.0),  # rubber pad
-)
 #: (grasp, point) pairs moved into grasp frames at once (24 MB of float64 coordinates).
 _CHUNK = 1 << 20
 
@@ -47,38 +34,57 @@ class ClearanceConfig:
 
     ``margin`` (m) grows every box of the hand on all sides; ``min_points`` is how many surface
     points inside the swept hand veto a grasp (one stray point does not); ``opening`` (m) is
-    the width the hand is open at while approaching; ``pregrasp_distance`` (m) how far back
-    along the approach the approach starts; ``contact_tolerance`` (m): contact in the last
+    the width the hand is open at while approaching and ``pregrasp_distance`` (m) how far back
+    along the approach the approach starts (unset: the hand's); ``contact_tolerance`` (m): contact in the last
     this-many metres of the approach is allowed, since a guarded approach stops there and
     closes only that much short of the grasp pose (often still a success, e.g. fingertips
     meeting the table). How the defaults were chosen: docs/concepts.md, "The clearance check"."""
 
     margin: float = 0.002
     min_points: int = 2
-    opening: float = MAX_OPENING
-    pregrasp_distance: float = PREGRASP_DISTANCE
+    opening: float | None = None
+    pregrasp_distance: float | None = None
     contact_tolerance: float = 0.005
 
     def __post_init__(self) -> None:
-        if self.margin < 0 or self.min_points < 1 or not 0 <= self.opening <= MAX_OPENING:
+        if self.margin < 0 or self.min_points < 1 or self.contact_tolerance < 0:
             raise ValueError(f"invalid clearance settings {self}")
-        if not 0 <= self.contact_tolerance <= self.pregrasp_distance:
+        if (self.opening is not None and self.opening < 0) or (self.pregrasp_distance or 0.0) < 0:
             raise ValueError(f"invalid clearance settings {self}")
 
+    def approach(self, hand: GripperDescription) -> tuple[float, float]:
+        """(opening, pre-grasp distance) of the approach with ``hand``: the set values, else the
+        hand's; a ``ValueError`` when they do not fit it."""
+        opening = hand.max_opening if self.opening is None else self.opening
+        distance = hand.pregrasp_distance if self.pregrasp_distance is None else self.pregrasp_distance
+        if opening > hand.max_opening or self.contact_tolerance > distance:
+            raise ValueError(f"clearance settings {self} do not fit the gripper {hand.name!r}")
+        return opening, distance
 
-@functools.lru_cache(maxsize=8)
-def hand_boxes(opening: float = MAX_OPENING, margin: float = 0.0) -> tuple[np.ndarray, ...]:
-    """The open hand as boxes in the grasp frame: centres (B, 3), rotations (B, 3, 3) box →
-    grasp frame and half extents (B, 3) grown by ``margin``. Palm first, then the left
-    (+y) and right (-y) fingers' base, web and pad. Kept per (opening, margin), read-only,
-    since building them is a fair share of checking the few grasps of a request."""
+
+def hand_boxes(
+    opening: float | None = None, margin: float = 0.0, hand: GripperDescription | None = None
+) -> tuple[np.ndarray, ...]:
+    """The hand (default: the active one, ``service.hands``) open at ``opening`` (default: fully)
+    as boxes in the grasp frame: centres (B, 3), rotations (B, 3, 3) box → grasp frame and half
+    extents (B, 3) grown by ``margin``. Palm first, then the left (+y) and right (-y) fingers'
+    boxes in the description's order. Kept per (hand, opening, margin), read-only, since
+    building them is a fair share of checking the few grasps of a request."""
+    hand = hand or active_hand()
+    return _hand_boxes(hand, hand.max_opening if opening is None else opening, margin)
+
+
+@functools.lru_cache(maxsize=16)
+def _hand_boxes(hand: GripperDescription, opening: float, margin: float) -> tuple[np.ndarray, ...]:
     half_opening = 0.5 * opening
-    centres, rotations, halves = [PALM_CENTRE], [np.eye(3)], [PALM_HALF]
+    palm = hand.palm
+    centres, rotations, halves = [palm.centre], [Rotation.from_euler("x", palm.tilt).as_matrix()], [palm.half]
     for side in (1.0, -1.0):
-        for (x, y, z), half, tilt in FINGER_BOXES:
+        for box in hand.fingers:
+            x, y, z = box.centre
             centres.append((x, side * (y + half_opening), z))
-            rotations.append(Rotation.from_euler("x", side * tilt).as_matrix())
-            halves.append(half)
+            rotations.append(Rotation.from_euler("x", side * box.tilt).as_matrix())
+            halves.append(box.half)
     boxes = (
         np.asarray(centres, dtype=np.float64),
         np.asarray(rotations, dtype=np.float64),
@@ -94,30 +100,33 @@ def approach_is_clear(
     positions: np.ndarray,
     orientations: np.ndarray,
     config: ClearanceConfig = ClearanceConfig(),
+    hand: GripperDescription | None = None,
 ) -> np.ndarray:
-    """Which grasps the open hand reaches without touching ``points``.
+    """Which grasps the open ``hand`` (default: the active one) reaches without touching ``points``.
 
     Args:
-        points: (M, 3) observed surface points. Any frame, as long as the grasps are in the
-            same one (the service passes world-frame points and world-frame grasps).
+        points: (M, 3) observed surface points, in the grasps' frame (the service: the world).
         positions: (G, 3) grasp frame origins, in the frame of ``points``.
         orientations: (G, 4) quaternions [x, y, z, w], grasp frame → the frame of ``points``.
         config: margin, vetoing point count, opening and approach length.
+        hand: the gripper description whose boxes are swept; default the active hand.
 
     Returns:
         (G,) bool, True where fewer than ``config.min_points`` points lie in the hand swept
         from the pre-grasp pose to the grasp pose.
     """
+    hand = hand or active_hand()
+    opening, pregrasp_distance = config.approach(hand)
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     clear = np.ones(len(positions), dtype=bool)
     if not len(positions) or len(points) < config.min_points:
         return clear
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
-    centres, box_rotations, halves = hand_boxes(config.opening, config.margin)
+    centres, box_rotations, halves = hand_boxes(opening, config.margin, hand)
     # The swept hand's bounding box in the grasp frame: only points inside it are tested per box.
     corners = _box_corners(centres, box_rotations, halves)  # (B, 8, 3) grasp frame
-    low = corners.min(axis=(0, 1)) - [0.0, 0.0, config.pregrasp_distance]
+    low = corners.min(axis=(0, 1)) - [0.0, 0.0, pregrasp_distance]
     high = corners.max(axis=(0, 1))
     direction = box_rotations[:, 2, :]  # the grasp frame's +z in each box's frame, (B, 3)
     intruding = np.zeros(len(positions), dtype=np.intp)
@@ -131,9 +140,7 @@ def approach_is_clear(
         if not len(grasp):
             continue
         in_box = np.einsum("bji,pbj->pbi", box_rotations, local[grasp, point][:, None, :] - centres[None])
-        swept = _segment_hits_box(
-            in_box, direction, halves, config.contact_tolerance, config.pregrasp_distance
-        )
+        swept = _segment_hits_box(in_box, direction, halves, config.contact_tolerance, pregrasp_distance)
         intruding[start : start + step] += np.bincount(grasp[swept.any(axis=1)], minlength=len(position))
     return intruding < config.min_points
 
@@ -163,13 +170,19 @@ def _segment_hits_box(
 
 
 def fingers_inside(
-    positions: np.ndarray, orientations: np.ndarray, to_workspace: np.ndarray, size: float
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    to_workspace: np.ndarray,
+    size: float,
+    hand: GripperDescription | None = None,
 ) -> np.ndarray:
-    """(G,) bool: the open hand's fingertips lie inside the workspace cube of side ``size`` (m),
-    ``to_workspace`` (4×4) taking the grasps' frame to the cube's. Beyond the cube the volume shows
-    nothing, so no check can vouch for the fingers there: on a table, a grasp at the cube's edge
-    otherwise passes with its fingers in the table outside it."""
-    tips = np.array([[0.0, 0.5 * MAX_OPENING, FINGER_DEPTH], [0.0, -0.5 * MAX_OPENING, FINGER_DEPTH]])
+    """(G,) bool: the open ``hand``'s (default: the active one) fingertips lie inside the workspace
+    cube of side ``size`` (m), ``to_workspace`` (4×4) taking the grasps' frame to the cube's. Beyond
+    the cube the volume shows nothing, so no check can vouch for the fingers there: on a table, a
+    grasp at the cube's edge otherwise passes with its fingers in the table outside it."""
+    hand = hand or active_hand()
+    half, depth = 0.5 * hand.max_opening, hand.finger_depth
+    tips = np.array([[0.0, half, depth], [0.0, -half, depth]])
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4))
     ends = np.asarray(positions, dtype=np.float64).reshape(-1, 1, 3) + np.stack(
         [rotations.apply(t) for t in tips], 1
@@ -183,18 +196,19 @@ def clear_grasps(
     points: np.ndarray,
     config: ClearanceConfig = ClearanceConfig(),
     workspace: tuple[np.ndarray, float] | None = None,
+    hand: GripperDescription | None = None,
 ) -> list[Grasp]:
-    """The ``grasps`` (world frame, order kept) whose approach is clear of ``points`` (world frame)
-    and, given the ``workspace`` (its 4×4 pose in the world and its size), whose open fingers stay
-    inside it (:func:`fingers_inside`)."""
+    """The ``grasps`` (world frame, order kept) whose approach with ``hand`` (default: the active
+    one) is clear of ``points`` (world frame) and, given the ``workspace`` (its 4×4 pose in the
+    world and its size), whose open fingers stay inside it (:func:`fingers_inside`)."""
     if not grasps:
         return []
     positions = np.array([g.position for g in grasps])
     orientations = np.array([g.orientation for g in grasps])
-    clear = approach_is_clear(points, positions, orientations, config)
+    clear = approach_is_clear(points, positions, orientations, config, hand)
     if workspace is not None:
         pose, size = workspace
         clear &= fingers_inside(
-            positions, orientations, np.linalg.inv(np.asarray(pose, dtype=np.float64)), size
+            positions, orientations, np.linalg.inv(np.asarray(pose, dtype=np.float64)), size, hand
         )
     return [g for g, ok in zip(grasps, clear, strict=True) if ok]

@@ -10,11 +10,14 @@ import time
 
 import numpy as np
 
+from client.gripper_description import DEFAULT_GRIPPER
 from client.schemas import (
     FrameMeta,
     FrameResult,
     GraspQuery,
     GraspResult,
+    GripperInfo,
+    GripperList,
     Intrinsics,
     ModelInfo,
     SessionCreate,
@@ -26,6 +29,7 @@ from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
 from service.grip import MIN_GRIP_FRAMES, GripConfig
+from service.hands import Hands, planning_for
 from service.planner import (
     NO_MODEL_MESSAGE,
     GraspPlanner,
@@ -57,6 +61,7 @@ class PlanningService:
         self.settings = settings
         self.planner = planner
         self.grip_config = GripConfig(preferred_alignment=settings.grip_preferred_alignment)
+        self.hands = Hands.build(settings.grippers, settings.network_grippers)
         self.sessions = SessionStore(
             settings.max_sessions,
             settings.session_ttl_s,
@@ -88,8 +93,29 @@ class PlanningService:
 
     # Sessions -----------------------------------------------------------------------------
     def create_session(self, spec: SessionCreate) -> SessionInfo:
-        """Open a session (``SessionExists`` for a taken id, ``CapacityExceeded`` when every one is busy)."""
-        return self.sessions.create(spec).info(self.sessions.ttl_s)
+        """Open a session for the hand ``spec`` names (``InvalidInput`` for an unknown one,
+        ``GripperNotServed`` for one no network serves; ``SessionExists`` for a taken id,
+        ``CapacityExceeded`` when every one is busy)."""
+        hand = self.hands.resolve(spec.gripper)
+        return self.sessions.create(spec, hand=hand).info(self.sessions.ttl_s)
+
+    def grippers(self) -> GripperList:
+        """The hands this service knows, each with the network that serves it (or none)."""
+        network = self.planner.model_id or "vgn (no weights loaded yet)"
+        return GripperList(
+            grippers=[
+                GripperInfo(
+                    name=name,
+                    version=hand.version,
+                    description=hand.description,
+                    max_opening=hand.max_opening,
+                    finger_depth=hand.finger_depth,
+                    network=network if name in self.hands.served else None,
+                )
+                for name, hand in sorted(self.hands.known.items())
+            ],
+            default=DEFAULT_GRIPPER,
+        )
 
     def export_session(self, session_id: str) -> bytes:
         """A session's snapshot (``service.snapshot``): its settings, counts and volumes, the
@@ -97,7 +123,8 @@ class PlanningService:
         with self.sessions.use(session_id) as session:
             coarse, fine = session.volume.state()
             state = Snapshot(session.session_id, session.workspace, session.intrinsics, session.frame_count,
-                             round(session.integration_ms, 3), coarse, fine, session.volume.decay)  # fmt: skip
+                             round(session.integration_ms, 3), coarse, fine, session.volume.decay,
+                             session.hand.name)  # fmt: skip
         return encode_snapshot(state)
 
     def import_session(self, data: bytes, session_id: str | None = None) -> SessionInfo:
@@ -109,8 +136,10 @@ class PlanningService:
             "workspace": snapshot.workspace,
             "intrinsics": snapshot.intrinsics,
             "decay": snapshot.decay,
+            "gripper": snapshot.gripper,
         })  # fmt: skip
-        return self.sessions.create(spec, snapshot).info(self.sessions.ttl_s)
+        hand = self.hands.resolve(spec.gripper)
+        return self.sessions.create(spec, snapshot, hand).info(self.sessions.ttl_s)
 
     def session_info(self, session_id: str) -> SessionInfo:
         """A session's state; ``SessionNotFound`` once it is gone or expired."""
@@ -200,7 +229,7 @@ class PlanningService:
         Options the query leaves unset (turn averaging, the clearance and grip checks) take the operator's
         defaults, so a plain request gets the service's best answer. No queued cloud frame
         starts fusing meanwhile (it would hold the GIL for tens of milliseconds)."""
-        with self.sessions.cloud_fusion.planning():
+        with self.sessions.cloud_fusion.planning(), planning_for(self.sessions.hand(session_id)):
             return self._plan(session_id, query)
 
     def _plan(self, session_id: str, query: GraspQuery) -> GraspResult:
@@ -219,6 +248,7 @@ class PlanningService:
             surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             workspace_size = session.workspace.size
+            session_hand = session.hand
             frame_count, integration_ms = session.frame_count, session.integration_ms
             revision, kept = session.revision, session.network_output
         # Planning runs outside the session lock so frames can keep arriving.
@@ -226,7 +256,7 @@ class PlanningService:
         ranked = query.model_copy(update={"max_grasps": None}) if clearance or grip else query
         if baseline:
             config = antipodal_config(ranked)
-            grasps, model = plan_antipodal(observed, workspace_pose, config), "antipodal"
+            grasps, model = plan_antipodal(observed, workspace_pose, config, session_hand), "antipodal"
             threshold = config.threshold
         else:
             turn_average = self.settings.turn_average if query.turn_average is None else query.turn_average

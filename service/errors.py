@@ -35,3 +35,8 @@ class CapacityExceeded(ServiceError):
 
 class ModelNotReady(ServiceError):
     """No model is loaded, so grasps cannot be planned (HTTP 503)."""
+
+
+class GripperNotServed(ServiceError):
+    """The session names a hand the service knows but no loaded network was trained for (HTTP 400,
+    gRPC FAILED_PRECONDITION): its grasps would be another hand's."""

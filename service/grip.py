@@ -8,7 +8,7 @@ meet the surface and ``alignment`` the mean cosine between those normals and the
 direction; a grasp passes when both fingers reach :class:`GripConfig`'s thresholds, and square
 grips (``preferred_alignment``) are kept over the rest. A finger closing from an unseen side is
 left to the network, and a single-frame volume is not checked (:data:`MIN_GRIP_FRAMES`).
-Frames: docs/conventions.md (the ``franka-v2`` pads, as in ``service.clearance``); figures and
+Frames: docs/conventions.md (the pads of the session's gripper description); figures and
 how the thresholds were chosen: docs/concepts.md, "The grip check".
 """
 
@@ -20,12 +20,10 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 from scipy.spatial.transform import Rotation
 
+from client.gripper_description import GripperDescription
 from client.schemas import Grasp
-from service.clearance import MAX_OPENING
+from service.hands import active_hand
 
-#: Where rays leave each pad, in the grasp frame: x across the pad, z along the approach (m).
-PAD_X = (-0.006, 0.0, 0.006)
-PAD_Z = (0.035, 0.041, 0.047)
 #: Ray step (m): a quarter of a default voxel.
 STEP = 0.002
 #: The check runs on volumes fused from at least this many frames. From one view the fused
@@ -96,7 +94,11 @@ class GripMeasure:
 
 
 def measure_grip(
-    grid: np.ndarray, voxel_size: float, positions: np.ndarray, orientations: np.ndarray
+    grid: np.ndarray,
+    voxel_size: float,
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    hand: GripperDescription | None = None,
 ) -> GripMeasure:
     """Close the open hand of each grasp on the surface of ``grid``.
 
@@ -105,16 +107,18 @@ def measure_grip(
         voxel_size: edge of one voxel (m).
         positions: (G, 3) grasp origins, workspace frame (m).
         orientations: (G, 4) quaternions [x, y, z, w], grasp frame → workspace frame.
+        hand: whose pads close (``pad.contact_x/z``) and from what opening; default the active hand.
     """
+    hand = hand or active_hand()
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     count = len(positions)
     if not count:
         empty = np.zeros((0, 2))
         return GripMeasure(empty, empty, empty, empty)
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
-    half_open = 0.5 * MAX_OPENING
+    half_open = 0.5 * hand.max_opening
     steps = np.arange(0.0, half_open + 1e-9, STEP)  # closing distance from the open pad
-    pad_x, pad_z = (a.ravel() for a in np.meshgrid(PAD_X, PAD_Z, indexing="ij"))
+    pad_x, pad_z = (a.ravel() for a in np.meshgrid(hand.pad.contact_x, hand.pad.contact_z, indexing="ij"))
     sides = np.array([1.0, -1.0])
     # Ray samples in the grasp frame: (side, ray, step, 3); y runs from ±half_open to 0.
     local = np.zeros((2, len(pad_x), len(steps), 3))
@@ -169,14 +173,15 @@ def gripping_grasps(
     voxel_size: float,
     workspace_pose: np.ndarray,
     config: GripConfig = GripConfig(),
+    hand: GripperDescription | None = None,
 ) -> list[Grasp]:
-    """The ``grasps`` (world frame, order kept) whose fingers both meet the surface of ``grid``
-    squarely enough, the squarest only where there are any (:meth:`GripMeasure.kept`);
-    ``workspace_pose`` (4×4) is the grid's corner in the world."""
+    """The ``grasps`` (world frame, order kept) whose fingers (``hand``'s, default the active one)
+    both meet the surface of ``grid`` squarely enough, the squarest only where there are any
+    (:meth:`GripMeasure.kept`); ``workspace_pose`` (4×4) is the grid's corner in the world."""
     if not grasps:
         return []
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     positions = np.array([g.position for g in grasps]) @ to_workspace[:3, :3].T + to_workspace[:3, 3]
     turned = Rotation.from_matrix(to_workspace[:3, :3]) * Rotation.from_quat([g.orientation for g in grasps])
-    kept = measure_grip(grid, voxel_size, positions, turned.as_quat()).kept(config)
+    kept = measure_grip(grid, voxel_size, positions, turned.as_quat(), hand).kept(config)
     return [g for g, ok in zip(grasps, kept, strict=True) if ok]

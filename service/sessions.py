@@ -11,6 +11,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
+from client.gripper_description import GripperDescription, default_gripper
 from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
 from service.cloud_fusion import CloudFusion, shared_fusion
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
@@ -37,6 +38,8 @@ class Session:
     #: ((revision, turn averaging), output) of the last forward pass on this session's grid,
     #: reused until the volume changes (planning again without a new frame costs detection only).
     network_output: tuple[tuple[int, bool], Any] | None = field(default=None, repr=False)
+    #: The hand the session plans for: the one its clearance and grip checks measure.
+    hand: GripperDescription = field(default_factory=default_gripper, repr=False)
 
     def reset(self) -> None:
         """Empty the volume and its counts; a kept network output no longer applies."""
@@ -65,6 +68,7 @@ class Session:
             last_used_at=self.last_used_at,
             expires_at=self.last_used_at + ttl_s,
             decay=self.volume.decay,
+            gripper=self.hand.name,
         )
 
 
@@ -106,10 +110,12 @@ class SessionStore:
         self._ended: OrderedDict[str, str] = OrderedDict()
         self._lock = threading.Lock()
 
-    def create(self, spec: SessionCreate, snapshot: Snapshot | None = None) -> Session:
-        """Register a new session, dropping expired ones first and
-        evicting the least recently used idle one at the limit. With a ``snapshot`` (whose
-        settings ``spec`` carries) the session starts from its volumes and counts, never
+    def create(
+        self, spec: SessionCreate, snapshot: Snapshot | None = None, hand: GripperDescription | None = None
+    ) -> Session:
+        """Register a new session for ``hand`` (default: the default gripper), dropping expired
+        ones first and evicting the least recently used idle one at the limit. With a ``snapshot``
+        (whose settings ``spec`` carries) the session starts from its volumes and counts, never
         visible half restored."""
         now = self._clock()
         workspace = spec.workspace
@@ -132,7 +138,9 @@ class SessionStore:
             if len(self._sessions) >= self.max_sessions:
                 self._evict_one()
             self._ended.pop(session_id, None)
-            session = Session(session_id, workspace, spec.intrinsics, volume, now, now)
+            session = Session(
+                session_id, workspace, spec.intrinsics, volume, now, now, hand=hand or default_gripper()
+            )
             if snapshot is not None:
                 session.frame_count, session.integration_ms = snapshot.frame_count, snapshot.integration_ms
             self._sessions[session_id] = session
@@ -159,6 +167,11 @@ class SessionStore:
         """A live session's state; ``SessionNotFound`` for an unknown or expired id."""
         with self._lock:
             return self._live(session_id, self._clock()).info(self.ttl_s)
+
+    def hand(self, session_id: str) -> GripperDescription:
+        """The hand a live session plans for (it never changes); ``SessionNotFound`` as ``info``."""
+        with self._lock:
+            return self._live(session_id, self._clock()).hand
 
     def list(self) -> list[SessionInfo]:
         """Every live session, least recently used first, after dropping the expired."""

@@ -8,6 +8,7 @@ from typing import Literal
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from client.gripper_description import DEFAULT_GRIPPER
 from service.grip import GripConfig
 
 #: The packaged default model; the service uses it when ``VGN_MODEL`` is unset.
@@ -108,6 +109,16 @@ class Settings(BaseSettings):
         "fingers: where some of a request's grasps grip that squarely, only those are kept (one grasp per "
         "look is executed, and beside a square grip the others slip more often); 0.5 or less keeps every grasp "
         "that passes the check, for clients that choose among many by reachability",
+    )
+    grippers: list[Path] = Field(
+        default_factory=list,
+        description="gripper description files (JSON, docs/your-gripper.md) the service knows besides the "
+        "built-in hands, as a JSON list: VGN_GRIPPERS='[\"/etc/vgn/my-hand.json\"]'",
+    )
+    network_grippers: list[str] = Field(
+        default_factory=lambda: [DEFAULT_GRIPPER],
+        description="the hands the loaded network plans for, as a JSON list; a session for any other hand is "
+        "refused. The packaged network was trained for 'franka' only",
     )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")

@@ -20,6 +20,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from client import snapshot as fmt
+from client.gripper_description import DEFAULT_GRIPPER, NAME_PATTERN
 from client.schemas import SESSION_ID_PATTERN, Intrinsics, Workspace
 from service.errors import InvalidInput
 
@@ -39,6 +40,7 @@ class Snapshot:
     coarse: np.ndarray
     fine: np.ndarray | None
     decay: float | None = None  # a forgetting session's factor (absent in older snapshots)
+    gripper: str = DEFAULT_GRIPPER  # the hand the session plans for (absent in older snapshots)
 
 
 def encode(snapshot: Snapshot) -> bytes:
@@ -52,6 +54,7 @@ def encode(snapshot: Snapshot) -> bytes:
         "frame_count": snapshot.frame_count,
         "integration_ms": snapshot.integration_ms,
         "decay": snapshot.decay,
+        "gripper": snapshot.gripper,
     }
     arrays = {fmt.META: np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8), fmt.COARSE: snapshot.coarse}
     if snapshot.fine is not None:
@@ -85,6 +88,9 @@ def decode(data: bytes) -> Snapshot:
         isinstance(decay, bool) or not isinstance(decay, int | float) or not 0 < decay < 1
     ):
         raise InvalidInput(f"the snapshot's decay must be a number in (0, 1) or null, got {decay!r}")
+    gripper = meta.get("gripper", DEFAULT_GRIPPER)
+    if not isinstance(gripper, str) or re.fullmatch(NAME_PATTERN, gripper) is None:
+        raise InvalidInput(f"the snapshot's gripper must be a gripper name, got {gripper!r}")
     with zipfile.ZipFile(io.BytesIO(data)) as archive:
         members = set(archive.namelist())
         unknown = members - {f"{name}.npy" for name in (fmt.META, fmt.COARSE, fmt.FINE)}
@@ -95,7 +101,7 @@ def decode(data: bytes) -> Snapshot:
         if f"{fmt.FINE}.npy" in members:
             fine = _volume(archive, fmt.FINE, set(range(16, MAX_FINE_RESOLUTION + 1)))
     return Snapshot(session_id, workspace, intrinsics, frame_count, float(integration_ms), coarse, fine,
-                    None if decay is None else float(decay))  # fmt: skip
+                    None if decay is None else float(decay), gripper)  # fmt: skip
 
 
 def _valid_id(session_id: str) -> bool:

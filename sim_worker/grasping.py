@@ -12,7 +12,6 @@ import numpy as np
 from sim_worker.gripper import Gripper
 from sim_worker.world import World
 
-PREGRASP_DISTANCE = 0.05  # m back along the approach
 LIFT_DISTANCE = 0.10  # m
 #: Beyond this angle from straight down, lifting goes along world z instead of back along the approach.
 STEEP_APPROACH = np.pi / 3
@@ -120,9 +119,10 @@ def execute_grasp(
         bodies, distance = contact if contact else ((), None)
         return GraspTrial(outcome, width, body, steps, time.perf_counter() - started, bodies, distance)
 
-    gripper.reset(translated(grasp_pose, [0.0, 0.0, -PREGRASP_DISTANCE]))
+    pregrasp_distance = gripper.spec.pregrasp_distance
+    gripper.reset(translated(grasp_pose, [0.0, 0.0, -pregrasp_distance]))
     if gripper.collides_now():
-        contact = (tuple(sorted(gripper.touching())), PREGRASP_DISTANCE)
+        contact = (tuple(sorted(gripper.touching())), pregrasp_distance)
         return finish(Outcome.PREGRASP_COLLISION, gripper.spec.max_opening)
     if fast:
         stopped_on_contact = not gripper.sweep_is_clear(grasp_pose)

@@ -1,4 +1,7 @@
-"""A free-floating parallel-jaw gripper whose base frame is the grasp frame (docs/conventions.md)."""
+"""A free-floating parallel-jaw gripper whose base frame is the grasp frame (docs/conventions.md).
+
+The hand's geometry is the ``franka`` gripper description (client/grippers/franka.json): its
+URDF, opening, finger depth, closing force and pre-grasp distance are read from there."""
 
 from __future__ import annotations
 
@@ -10,12 +13,16 @@ import numpy as np
 import pybullet
 
 from client.geometry import pose_from_matrix
+from client.gripper_description import GripperDescription, default_gripper
 from sim_worker.world import World
 
-GRIPPER_URDF = Path(__file__).parent / "assets" / "gripper.urdf"
+#: The simulated hand's description (the default one: ``franka``).
+HAND: GripperDescription = default_gripper()
+#: Its URDF; a description names it relative to the folder that holds the packages.
+GRIPPER_URDF = Path(__file__).resolve().parents[1] / str(HAND.urdf)
 #: Which hand made a label. Datasets record it, and data of different versions is never mixed:
 #: a label says what *this* hand can do. ``box-v1`` was the earlier 12 mm box-finger hand.
-GRIPPER_VERSION = "franka-v2"
+GRIPPER_VERSION = HAND.version
 #: How far (in 2 mm waypoints) a contact-stopped approach may back off to stop pressing.
 MAX_BACK_OFF_STEPS = 3
 #: Where the gripper waits between grasps: far outside the workspace and every camera's view.
@@ -24,11 +31,13 @@ PARKED_POSITION = (0.15, 0.15, 10.0)
 
 @dataclass(frozen=True)
 class GripperSpec:
-    """Franka-hand parameters; forces, friction and motion as in VGN's simulation."""
+    """The simulated hand's parameters: geometry and closing force from its description (:data:`HAND`),
+    friction and motion as in VGN's simulation."""
 
-    max_opening: float = 0.08
-    finger_depth: float = 0.05
-    finger_force: float = 20.0  # N per finger while closing
+    max_opening: float = HAND.max_opening
+    finger_depth: float = HAND.finger_depth
+    finger_force: float = HAND.force.closing  # N per finger while closing
+    pregrasp_distance: float = HAND.pregrasp_distance  # m back along the approach the open hand starts
     finger_friction: float = 1.0
     #: Rubber pads: a compliant contact (N/m, N·s/m) instead of a rigid one, so a pad yields a
     #: few millimetres under the closing force and grips with an area rather than a point.

@@ -25,6 +25,7 @@ from typing import TextIO
 import numpy as np
 
 from client.geometry import invert, matrix_from_pose, pose_from_matrix
+from client.gripper_description import default_gripper
 from client.schemas import Intrinsics
 from vgn_data.files import atomic_writer, crash_now, crash_point, write_atomically
 
@@ -33,14 +34,15 @@ GRASP_COLUMNS = ["scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "la
 
 @dataclass(frozen=True)
 class DatasetSetup:
-    """The dataset's setup.json: workspace size, camera intrinsics and gripper dimensions, in VGN's layout."""
+    """The dataset's setup.json: workspace size, camera intrinsics and gripper dimensions, in VGN's
+    layout; the gripper's default to the default gripper description's (``franka``)."""
 
     size: float = 0.30
     intrinsics: Intrinsics = field(
         default_factory=lambda: Intrinsics(width=640, height=480, fx=540.0, fy=540.0, cx=320.0, cy=240.0)
     )
-    max_opening_width: float = 0.08
-    finger_depth: float = 0.05
+    max_opening_width: float = field(default_factory=lambda: default_gripper().max_opening)
+    finger_depth: float = field(default_factory=lambda: default_gripper().finger_depth)
 
     def to_json(self) -> dict:
         """The content of setup.json, intrinsics as VGN writes them (a flattened 3×3 ``K``)."""

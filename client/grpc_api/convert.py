@@ -17,6 +17,8 @@ from client.schemas import (
     FrameResult,
     GraspQuery,
     GraspResult,
+    GripperInfo,
+    GripperList,
     Intrinsics,
     ModelInfo,
     Pose,
@@ -78,7 +80,7 @@ def workspace_dict(message: pb.Workspace) -> dict[str, Any]:
 
 def session_create_dict(message: pb.CreateSessionRequest) -> dict[str, Any]:
     """A ``SessionCreate`` dict of the fields the request sets."""
-    data = optional_fields(message, ("session_id", "decay"))
+    data = optional_fields(message, ("session_id", "decay", "gripper"))
     if message.HasField("workspace"):
         data["workspace"] = workspace_dict(message.workspace)
     if message.HasField("intrinsics"):
@@ -152,6 +154,7 @@ def session_message(info: SessionInfo) -> pb.Session:
         last_used_at=info.last_used_at,
         expires_at=info.expires_at,
         decay=info.decay,
+        gripper=info.gripper,
     )
 
 
@@ -197,6 +200,13 @@ def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
     return message
 
 
+def gripper_list_message(hands: GripperList) -> pb.GripperList:
+    """The service's ``GripperList`` as a reply."""
+    return pb.GripperList(
+        grippers=[pb.GripperInfo(**g.model_dump()) for g in hands.grippers], default=hands.default
+    )
+
+
 def model_info_message(info: ModelInfo) -> pb.ModelInfo:
     """The service's ``ModelInfo`` as a reply; the free-form card and runtime travel as JSON text."""
     data = info.model_dump(exclude={"card", "runtime"}, exclude_none=True)
@@ -223,6 +233,7 @@ def session_info(message: pb.Session) -> SessionInfo:
         last_used_at=message.last_used_at,
         expires_at=message.expires_at,
         decay=message.decay if message.HasField("decay") else None,
+        **({"gripper": message.gripper} if message.gripper else {}),
     )
 
 
@@ -264,6 +275,22 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
         grip_dropped=message.grip_dropped if message.HasField("grip_dropped") else None,
         turn_average=message.turn_average if message.HasField("turn_average") else None,
     )
+
+
+def gripper_list(message: pb.GripperList) -> GripperList:
+    """A ``ListGrippers`` reply as the client's ``GripperList``."""
+    hands = [
+        GripperInfo(
+            name=g.name,
+            version=g.version,
+            description=g.description,
+            max_opening=g.max_opening,
+            finger_depth=g.finger_depth,
+            network=g.network if g.HasField("network") else None,
+        )  # fmt: skip
+        for g in message.grippers
+    ]
+    return GripperList(grippers=hands, default=message.default)
 
 
 def model_info(message: pb.ModelInfo) -> ModelInfo:

@@ -82,19 +82,21 @@ class Workspace(_message.Message):
     def __init__(self, size: _Optional[float] = ..., resolution: _Optional[int] = ..., pose: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
 
 class CreateSessionRequest(_message.Message):
-    __slots__ = ("session_id", "workspace", "intrinsics", "decay")
+    __slots__ = ("session_id", "workspace", "intrinsics", "decay", "gripper")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     WORKSPACE_FIELD_NUMBER: _ClassVar[int]
     INTRINSICS_FIELD_NUMBER: _ClassVar[int]
     DECAY_FIELD_NUMBER: _ClassVar[int]
+    GRIPPER_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     workspace: Workspace
     intrinsics: Intrinsics
     decay: float
-    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., decay: _Optional[float] = ...) -> None: ...
+    gripper: str
+    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., decay: _Optional[float] = ..., gripper: _Optional[str] = ...) -> None: ...
 
 class Session(_message.Message):
-    __slots__ = ("session_id", "workspace", "intrinsics", "frame_count", "integration_ms", "created_at", "last_used_at", "expires_at", "decay")
+    __slots__ = ("session_id", "workspace", "intrinsics", "frame_count", "integration_ms", "created_at", "last_used_at", "expires_at", "decay", "gripper")
     SESSION_ID_FIELD_NUMBER: _ClassVar[int]
     WORKSPACE_FIELD_NUMBER: _ClassVar[int]
     INTRINSICS_FIELD_NUMBER: _ClassVar[int]
@@ -104,6 +106,7 @@ class Session(_message.Message):
     LAST_USED_AT_FIELD_NUMBER: _ClassVar[int]
     EXPIRES_AT_FIELD_NUMBER: _ClassVar[int]
     DECAY_FIELD_NUMBER: _ClassVar[int]
+    GRIPPER_FIELD_NUMBER: _ClassVar[int]
     session_id: str
     workspace: Workspace
     intrinsics: Intrinsics
@@ -113,7 +116,8 @@ class Session(_message.Message):
     last_used_at: float
     expires_at: float
     decay: float
-    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., frame_count: _Optional[int] = ..., integration_ms: _Optional[float] = ..., created_at: _Optional[float] = ..., last_used_at: _Optional[float] = ..., expires_at: _Optional[float] = ..., decay: _Optional[float] = ...) -> None: ...
+    gripper: str
+    def __init__(self, session_id: _Optional[str] = ..., workspace: _Optional[_Union[Workspace, _Mapping]] = ..., intrinsics: _Optional[_Union[Intrinsics, _Mapping]] = ..., frame_count: _Optional[int] = ..., integration_ms: _Optional[float] = ..., created_at: _Optional[float] = ..., last_used_at: _Optional[float] = ..., expires_at: _Optional[float] = ..., decay: _Optional[float] = ..., gripper: _Optional[str] = ...) -> None: ...
 
 class GetSessionRequest(_message.Message):
     __slots__ = ("session_id",)
@@ -286,6 +290,34 @@ class Cloud(_message.Message):
 class GetModelInfoRequest(_message.Message):
     __slots__ = ()
     def __init__(self) -> None: ...
+
+class ListGrippersRequest(_message.Message):
+    __slots__ = ()
+    def __init__(self) -> None: ...
+
+class GripperInfo(_message.Message):
+    __slots__ = ("name", "version", "description", "max_opening", "finger_depth", "network")
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    VERSION_FIELD_NUMBER: _ClassVar[int]
+    DESCRIPTION_FIELD_NUMBER: _ClassVar[int]
+    MAX_OPENING_FIELD_NUMBER: _ClassVar[int]
+    FINGER_DEPTH_FIELD_NUMBER: _ClassVar[int]
+    NETWORK_FIELD_NUMBER: _ClassVar[int]
+    name: str
+    version: str
+    description: str
+    max_opening: float
+    finger_depth: float
+    network: str
+    def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., description: _Optional[str] = ..., max_opening: _Optional[float] = ..., finger_depth: _Optional[float] = ..., network: _Optional[str] = ...) -> None: ...
+
+class GripperList(_message.Message):
+    __slots__ = ("grippers", "default")
+    GRIPPERS_FIELD_NUMBER: _ClassVar[int]
+    DEFAULT_FIELD_NUMBER: _ClassVar[int]
+    grippers: _containers.RepeatedCompositeFieldContainer[GripperInfo]
+    default: str
+    def __init__(self, grippers: _Optional[_Iterable[_Union[GripperInfo, _Mapping]]] = ..., default: _Optional[str] = ...) -> None: ...
 
 class ModelInfo(_message.Message):
     __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json")

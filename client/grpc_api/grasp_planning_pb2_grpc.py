@@ -89,6 +89,11 @@ class GraspPlanningStub:
                 request_serializer=vgn_dot_v1_dot_grasp__planning__pb2.GetModelInfoRequest.SerializeToString,
                 response_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.ModelInfo.FromString,
                 _registered_method=True)
+        self.ListGrippers = channel.unary_unary(
+                '/vgn.v1.GraspPlanning/ListGrippers',
+                request_serializer=vgn_dot_v1_dot_grasp__planning__pb2.ListGrippersRequest.SerializeToString,
+                response_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.GripperList.FromString,
+                _registered_method=True)
         self.Track = channel.stream_stream(
                 '/vgn.v1.GraspPlanning/Track',
                 request_serializer=vgn_dot_v1_dot_grasp__planning__pb2.TrackRequest.SerializeToString,
@@ -173,6 +178,13 @@ class GraspPlanningServicer:
         context.set_details('Method not implemented!')
         raise NotImplementedError('Method not implemented!')
 
+    def ListGrippers(self, request, context):
+        """The hands the service knows and the network serving each (GET /grippers).
+        """
+        context.set_code(grpc.StatusCode.UNIMPLEMENTED)
+        context.set_details('Method not implemented!')
+        raise NotImplementedError('Method not implemented!')
+
     def Track(self, request_iterator, context):
         """Closed-loop planning: fuse each frame as it arrives and, after every `plan_every`-th one,
         send the current ranked grasps, each with a `track_id` that stays with the same grasp
@@ -239,6 +251,11 @@ def add_GraspPlanningServicer_to_server(servicer, server):
                     servicer.GetModelInfo,
                     request_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.GetModelInfoRequest.FromString,
                     response_serializer=vgn_dot_v1_dot_grasp__planning__pb2.ModelInfo.SerializeToString,
+            ),
+            'ListGrippers': grpc.unary_unary_rpc_method_handler(
+                    servicer.ListGrippers,
+                    request_deserializer=vgn_dot_v1_dot_grasp__planning__pb2.ListGrippersRequest.FromString,
+                    response_serializer=vgn_dot_v1_dot_grasp__planning__pb2.GripperList.SerializeToString,
             ),
             'Track': grpc.stream_stream_rpc_method_handler(
                     servicer.Track,
@@ -543,6 +560,33 @@ class GraspPlanning:
             '/vgn.v1.GraspPlanning/GetModelInfo',
             vgn_dot_v1_dot_grasp__planning__pb2.GetModelInfoRequest.SerializeToString,
             vgn_dot_v1_dot_grasp__planning__pb2.ModelInfo.FromString,
+            options,
+            channel_credentials,
+            insecure,
+            call_credentials,
+            compression,
+            wait_for_ready,
+            timeout,
+            metadata,
+            _registered_method=True)
+
+    @staticmethod
+    def ListGrippers(request,
+            target,
+            options=(),
+            channel_credentials=None,
+            call_credentials=None,
+            insecure=False,
+            compression=None,
+            wait_for_ready=None,
+            timeout=None,
+            metadata=None):
+        return grpc.experimental.unary_unary(
+            request,
+            target,
+            '/vgn.v1.GraspPlanning/ListGrippers',
+            vgn_dot_v1_dot_grasp__planning__pb2.ListGrippersRequest.SerializeToString,
+            vgn_dot_v1_dot_grasp__planning__pb2.GripperList.FromString,
             options,
             channel_credentials,
             insecure,

@@ -13,6 +13,7 @@ from starlette.routing import Match
 
 from service.errors import (
     CapacityExceeded,
+    GripperNotServed,
     InvalidInput,
     ModelNotReady,
     ServiceError,
@@ -26,6 +27,7 @@ log = logging.getLogger("vgn.service")
 
 STATUS_OF: dict[type[ServiceError], int] = {
     InvalidInput: 400,
+    GripperNotServed: 400,
     SessionNotFound: 404,
     SessionExists: 409,
     UnsupportedMediaType: 415,

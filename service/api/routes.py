@@ -21,6 +21,7 @@ from client.schemas import (
     FrameResult,
     GraspQuery,
     GraspResult,
+    GripperList,
     Health,
     ModelInfo,
     Readiness,
@@ -119,6 +120,13 @@ def prometheus_metrics(service: Core, request: Request) -> Response:
 def model(service: Core) -> ModelInfo:
     """The loaded model: weights id, source, architecture, device and conventions."""
     return service.model_info()
+
+
+@api.get("/grippers", response_model=GripperList)
+def grippers(service: Core) -> GripperList:
+    """The hands this service knows (built in, and the operator's `VGN_GRIPPERS` files), each with
+    the network that plans for it; a session names one (`gripper`), a hand with no network is refused."""
+    return service.grippers()
 
 
 @api.post("/sessions", status_code=201, response_model=SessionInfo, responses={409: {"model": ErrorResponse}})

@@ -45,7 +45,9 @@ def scene_of(service: PlanningService, session_id: str, query: ViewQuery) -> dic
         result, error = service.plan(session_id, query.grasp_query()), None
     except ModelNotReady as why:
         result, error = None, str(why)
-    return build_scene(service.session_info(session_id), service.cloud(session_id), result, query, error)
+    info = service.session_info(session_id)
+    depth = service.hands.known[info.gripper].finger_depth
+    return build_scene(info, service.cloud(session_id), result, query, error, depth)
 
 
 @viewer.get(

@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from client.gripper_description import GripperDescription, default_gripper
 from client.schemas import Grasp
 
 # The steps, per seed:
@@ -27,32 +28,65 @@ from client.schemas import Grasp
 #    approach directions z are spread evenly around y, starting from the one closest to straight
 #    down; x = y × z.
 # 3. For each of a few depths (fingertips 5–45 mm past the seed along z) the points in the closing
-#    region (|x| <= 1 cm, 0 <= z <= 5 cm, within the 8 cm opening towards -y) are collected. With at
-#    least ``min_points`` of them, the closed width is their y-extent + 2 mm (reject above 0.08 m)
-#    and the hand is centred on them along y.
+#    region (|x| <= half the pad's width, 0 <= z <= the finger depth, within the opening towards -y)
+#    are collected. With at least ``min_points`` of them, the closed width is their y-extent + 2 mm
+#    (reject above the maximum opening) and the hand is centred on them along y.
 # 4. Antipodal test: of the points within 3 mm of each jaw, at least ``min_cone_fraction`` must have
 #    normals within ``friction_angle`` of the jaw's outward direction (+y, -y).
 # 5. Collision test against the cloud (the table is part of it): no point may lie in either finger
-#    (12 mm thick along y, 2 cm wide along x, 5 cm long) or in the palm box (0.04 x 0.20 x 0.06 m
+#    (box fingers :data:`FINGER_THICKNESS` thick along y, as wide as the pad along x, the finger depth
+#    long) or in the palm box (:data:`PALM_HALF_X` deep along x, as wide and tall as the hand's palm,
 #    behind the finger bases), and no corner of the hand may come within 5 mm of the lowest cloud
-#    point. Of the valid depths the deepest is kept.
-# Score: ``antipodality * (1 - 0.05 * width / 0.08) * (0.9 + 0.1 * downness)``, antipodality being the
+#    point. Of the valid depths the deepest is kept. The hand is the gripper description's (default
+#    ``franka``: 2 cm wide, 5 cm long fingers, a 0.04 x 0.20 x 0.06 m palm, 8 cm opening); its
+#    fingers and palm depth are the baseline's own simpler box model.
+# Score: ``antipodality * (1 - 0.05 * width / max opening) * (0.9 + 0.1 * downness)``, antipodality being the
 # mean |n · y| of the jaw points (1: both contacts exactly opposed) and downness max(0, -approach_z)
 # (1: straight down); a clean top-down antipodal grasp scores about 0.93-0.97, a side grasp ~0.1
 # less. Non-maximum suppression counts a π turn about the approach axis as the same grasp.
 
-MAX_OPENING = 0.08
-FINGER_DEPTH = 0.05
-FINGER_THICKNESS = 0.012  # along y
-FINGER_HALF_WIDTH = 0.01  # along x
-PALM_HALF_X, PALM_HALF_Y, PALM_DEPTH = 0.02, 0.10, 0.06
+#: The baseline's box fingers are this thick along y (m) and its palm this half deep along x (m),
+#: whatever the hand: a simpler collision model than the description's stepped fingers.
+FINGER_THICKNESS = 0.012
+PALM_HALF_X = 0.02
 WIDTH_MARGIN = 0.002
 JAW_TOLERANCE = 0.003
 TABLE_CLEARANCE = 0.005
-#: Balls around a seed holding every point the fingers (_NEAR) and the palm (_REACH) of a hand
-#: placed for that seed can touch.
-_NEAR = math.sqrt(FINGER_HALF_WIDTH**2 + (MAX_OPENING + FINGER_THICKNESS + 0.003) ** 2 + 0.045**2)
-_REACH = math.sqrt(0.045**2 + (PALM_HALF_Y + MAX_OPENING) ** 2 + (PALM_DEPTH + FINGER_DEPTH) ** 2)
+
+
+@dataclass(frozen=True)
+class Jaws:
+    """The hand as the baseline models it (m): opening, finger length along the approach, half the
+    finger width along x, the palm's half width along y and its height along z; ``near``/``reach``
+    are balls around a seed holding every point the fingers and the palm of a hand placed for that
+    seed can touch."""
+
+    max_opening: float
+    finger_depth: float
+    finger_half_width: float
+    palm_half_y: float
+    palm_depth: float
+
+    @property
+    def near(self) -> float:
+        """Radius (m) of the fingers' neighbourhood of a seed."""
+        return math.sqrt(
+            self.finger_half_width**2 + (self.max_opening + FINGER_THICKNESS + 0.003) ** 2 + 0.045**2
+        )
+
+    @property
+    def reach(self) -> float:
+        """Radius (m) of the palm's neighbourhood of a seed."""
+        return math.sqrt(
+            0.045**2 + (self.palm_half_y + self.max_opening) ** 2 + (self.palm_depth + self.finger_depth) ** 2
+        )
+
+
+def jaws_of(hand: GripperDescription) -> Jaws:
+    """The baseline's model of ``hand``: its opening, finger depth, pad width and palm."""
+    return Jaws(
+        hand.max_opening, hand.finger_depth, hand.pad_box.half[0], hand.palm.half[1], hand.palm.size[2]
+    )
 
 
 @dataclass(frozen=True)
@@ -79,12 +113,17 @@ class AntipodalConfig:
 
 
 def plan_antipodal(
-    cloud: np.ndarray, workspace_pose: np.ndarray, config: AntipodalConfig = AntipodalConfig()
+    cloud: np.ndarray,
+    workspace_pose: np.ndarray,
+    config: AntipodalConfig = AntipodalConfig(),
+    hand: GripperDescription | None = None,
 ) -> list[Grasp]:
-    """Antipodal grasps on ``cloud`` ((M, 6) world points + outward unit normals), best first.
+    """Antipodal grasps on ``cloud`` ((M, 6) world points + outward unit normals), best first, for
+    ``hand`` (default: the default gripper description).
 
     ``workspace_pose`` (4×4 workspace → world) only serves the crop box.
     """
+    jaws = jaws_of(hand or default_gripper())
     cloud = np.asarray(cloud, dtype=np.float64).reshape(-1, 6)
     if len(cloud) < config.min_points:
         return []
@@ -99,7 +138,7 @@ def plan_antipodal(
     tree = cKDTree(points)
     found = []  # (quality, position, rotation matrix, width)
     for seed in seeds:
-        found.extend(_grasps_at_seed(points, normals, tree, seed, floor, config))
+        found.extend(_grasps_at_seed(points, normals, tree, seed, floor, config, jaws))
     if not found:
         return []
     quality = np.array([f[0] for f in found])
@@ -131,14 +170,16 @@ def _grasps_at_seed(
     seed: int,
     floor: float,
     config: AntipodalConfig,
+    jaws: Jaws,
 ) -> list[tuple[float, np.ndarray, np.ndarray, float]]:
     """The best valid depth for each approach direction around one seed."""
+    max_opening, finger_depth, finger_half_width = jaws.max_opening, jaws.finger_depth, jaws.finger_half_width
     origin, y = points[seed], normals[seed]
     cos_cone = math.cos(config.friction_angle)
-    near = np.asarray(tree.query_ball_point(origin, _NEAR), dtype=np.intp)
+    near = np.asarray(tree.query_ball_point(origin, jaws.near), dtype=np.intp)
     rel = points[near] - origin
     py, ny = rel @ y, normals[near] @ y  # n · y is the same for every approach
-    opposite = (ny <= -cos_cone) & (py >= -MAX_OPENING) & (py <= 0.0)
+    opposite = (ny <= -cos_cone) & (py >= -max_opening) & (py <= 0.0)
     if not opposite.any():  # nothing to close on: no antipodal grasp from this seed
         return []
     down = np.array([0.0, 0.0, -1.0])
@@ -154,15 +195,15 @@ def _grasps_at_seed(
     for angle in np.arange(config.approaches) * (2 * np.pi / config.approaches):
         c, s = math.cos(angle), math.sin(angle)
         px_all = c * pv - s * pu  # x = y × z with z = c a0 + s v
-        slab = np.abs(px_all) <= FINGER_HALF_WIDTH
+        slab = np.abs(px_all) <= finger_half_width
         pz, qy, qn = (c * pu + s * pv)[slab], py[slab], ny[slab]
-        along = (pz <= tips) & (pz >= tips - FINGER_DEPTH)  # (D, S) between finger bases and tips
-        closing = along & (qy >= -MAX_OPENING - WIDTH_MARGIN) & (qy <= WIDTH_MARGIN / 2)
+        along = (pz <= tips) & (pz >= tips - finger_depth)  # (D, S) between finger bases and tips
+        closing = along & (qy >= -max_opening - WIDTH_MARGIN) & (qy <= WIDTH_MARGIN / 2)
         count = closing.sum(axis=1)
         y_max = np.where(closing, qy, -np.inf).max(axis=1)
         y_min = np.where(closing, qy, np.inf).min(axis=1)
         width = y_max - y_min + WIDTH_MARGIN
-        valid = (count >= config.min_points) & (width <= MAX_OPENING)
+        valid = (count >= config.min_points) & (width <= max_opening)
         if not valid.any():
             continue
         centre = np.where(valid, (y_max + y_min) / 2, 0.0)
@@ -177,17 +218,19 @@ def _grasps_at_seed(
         valid &= ~fingers.any(axis=1)
         z_axis = c * a0 + s * v
         x_axis = np.cross(y, z_axis)
-        valid &= _lowest_z(origin, x_axis, y, z_axis, centre, half, tips[:, 0]) >= floor
+        valid &= _lowest_z(origin, x_axis, y, z_axis, centre, half, tips[:, 0], jaws) >= floor
         if not valid.any():
             continue
         if far is None:
-            far_rel = points[np.asarray(tree.query_ball_point(origin, _REACH), dtype=np.intp)] - origin
+            far_rel = points[np.asarray(tree.query_ball_point(origin, jaws.reach), dtype=np.intp)] - origin
             far = far_rel @ a0, far_rel @ y, far_rel @ v
         fu, fy, fv = far
         in_x = np.abs(c * fv - s * fu) <= PALM_HALF_X
         fz, fy = (c * fu + s * fv)[in_x], fy[in_x]
-        base = tips - FINGER_DEPTH
-        palm = (fz < base) & (fz >= base - PALM_DEPTH) & (np.abs(fy - centre[:, None]) <= PALM_HALF_Y)
+        base = tips - finger_depth
+        palm = (
+            (fz < base) & (fz >= base - jaws.palm_depth) & (np.abs(fy - centre[:, None]) <= jaws.palm_half_y)
+        )
         valid &= ~palm.any(axis=1)
         if not valid.any():
             continue
@@ -195,9 +238,9 @@ def _grasps_at_seed(
         antipodality = 0.5 * (
             (hi_jaw[d] * np.abs(qn)).sum() / hi_n[d] + (lo_jaw[d] * np.abs(qn)).sum() / lo_n[d]
         )
-        position = origin + centre[d] * y + (tips[d, 0] - FINGER_DEPTH) * z_axis
+        position = origin + centre[d] * y + (tips[d, 0] - finger_depth) * z_axis
         downness = max(0.0, -z_axis[2])
-        quality = antipodality * (1 - 0.05 * width[d] / MAX_OPENING) * (0.9 + 0.1 * downness)
+        quality = antipodality * (1 - 0.05 * width[d] / max_opening) * (0.9 + 0.1 * downness)
         results.append((quality, position, np.column_stack([x_axis, y, z_axis]), width[d]))
     return results
 
@@ -210,8 +253,10 @@ def _lowest_z(
     centre: np.ndarray,
     half: np.ndarray,
     tips: np.ndarray,
+    jaws: Jaws,
 ) -> np.ndarray:
     """World z of the lowest corner of the fingers and palm, per depth (all arrays (D,))."""
+    finger_half_width, palm_half_y = jaws.finger_half_width, jaws.palm_half_y
 
     def box_min(
         x_lo: float | np.ndarray,
@@ -227,15 +272,15 @@ def _lowest_z(
             + np.minimum(z_lo * z_axis[2], z_hi * z_axis[2])
         )
 
-    base = tips - FINGER_DEPTH
+    base = tips - jaws.finger_depth
     hi_finger = box_min(
-        -FINGER_HALF_WIDTH, FINGER_HALF_WIDTH, centre + half, centre + half + FINGER_THICKNESS, base, tips
+        -finger_half_width, finger_half_width, centre + half, centre + half + FINGER_THICKNESS, base, tips
     )
     lo_finger = box_min(
-        -FINGER_HALF_WIDTH, FINGER_HALF_WIDTH, centre - half - FINGER_THICKNESS, centre - half, base, tips
+        -finger_half_width, finger_half_width, centre - half - FINGER_THICKNESS, centre - half, base, tips
     )
     palm = box_min(
-        -PALM_HALF_X, PALM_HALF_X, centre - PALM_HALF_Y, centre + PALM_HALF_Y, base - PALM_DEPTH, base
+        -PALM_HALF_X, PALM_HALF_X, centre - palm_half_y, centre + palm_half_y, base - jaws.palm_depth, base
     )
     return origin[2] + np.minimum(np.minimum(hi_finger, lo_finger), palm)
 

@@ -20,6 +20,7 @@ from client.grpc_api import grasp_planning_pb2 as pb
 from service.api.errors import STATUS_OF, field_errors
 from service.errors import (
     CapacityExceeded,
+    GripperNotServed,
     InvalidInput,
     ModelNotReady,
     ServiceError,
@@ -43,6 +44,7 @@ API_KEY_MESSAGE = "missing or wrong API key (x-api-key or authorization: Bearer 
 
 CODE_OF: dict[type[ServiceError], grpc.StatusCode] = {
     InvalidInput: grpc.StatusCode.INVALID_ARGUMENT,
+    GripperNotServed: grpc.StatusCode.FAILED_PRECONDITION,
     UnsupportedMediaType: grpc.StatusCode.INVALID_ARGUMENT,
     SessionNotFound: grpc.StatusCode.NOT_FOUND,
     SessionExists: grpc.StatusCode.ALREADY_EXISTS,

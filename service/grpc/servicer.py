@@ -184,6 +184,11 @@ class GraspPlanning(GraspPlanningServicer):
         """``GET /model``; card and runtime as JSON text."""
         return convert.model_info_message(self.core.model_info())
 
+    @rpc
+    def ListGrippers(self, request: pb.ListGrippersRequest, context: grpc.ServicerContext) -> pb.GripperList:
+        """``GET /grippers``."""
+        return convert.gripper_list_message(self.core.grippers())
+
     def _fuse_streamed(self, index: int, session_id: str, frame: pb.Frame) -> FrameResult:
         """``_fuse`` for the ``index``-th frame of a stream: its errors name the frame."""
         try:

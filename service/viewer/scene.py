@@ -66,9 +66,10 @@ def workspace_edges(info: SessionInfo) -> list[list[float] | None]:
     return path
 
 
-def grasp_outline(grasp: Grasp) -> list[list[float] | None]:
-    """The gripper at ``grasp`` (palm, both fingers at its width, a stem) as a polyline, world frame."""
-    world = gripper_outline(grasp.as_matrix(), grasp.width)
+def grasp_outline(grasp: Grasp, finger_depth: float | None = None) -> list[list[float] | None]:
+    """The gripper at ``grasp`` (palm, both fingers at its width and ``finger_depth`` long, default
+    the default hand's, a stem) as a polyline, world frame."""
+    world = gripper_outline(grasp.as_matrix(), grasp.width, finger_depth)
     return [_rounded(point) if np.all(np.isfinite(point)) else None for point in world]
 
 
@@ -84,8 +85,10 @@ def build_scene(
     result: GraspResult | None,
     query: ViewQuery,
     planning_error: str | None = None,
+    finger_depth: float | None = None,
 ) -> dict[str, Any]:
-    """The page's data: everything it draws and lists, JSON-ready."""
+    """The page's data: everything it draws and lists, JSON-ready; grasps drawn with fingers
+    ``finger_depth`` long (the session's hand; default the default hand's)."""
     shown = subsample(cloud[np.all(np.isfinite(cloud), axis=1)], query.max_points)
     grasps = result.grasps if result else []
     return {
@@ -105,7 +108,7 @@ def build_scene(
                 "width": round(g.width, 5),
                 "tilt_deg": tilt_degrees(g),
                 "position": _rounded(np.asarray(g.position)),
-                "outline": grasp_outline(g),
+                "outline": grasp_outline(g, finger_depth),
             }
             for rank, g in enumerate(grasps, 1)
         ],

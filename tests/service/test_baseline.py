@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from client.gripper_description import default_gripper
 from client.schemas import GraspQuery, SessionCreate
 from service.baseline import AntipodalConfig, plan_antipodal
 from service.core import PlanningService
@@ -14,7 +15,7 @@ from service.settings import Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 
 SCENE = BoxScene()  # 0.08 (x) x 0.06 (y) x 0.06 (z) on the table
-FINGER_DEPTH = 0.05
+FINGER_DEPTH = default_gripper().finger_depth
 
 
 def fused_session(core: PlanningService, views: int = 6) -> str:

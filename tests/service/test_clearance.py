@@ -13,14 +13,13 @@ import pytest
 from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
+from client.gripper_description import default_gripper
 from client.grpc_api import convert
 from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
 from client.schemas import GraspQuery, GraspResult, SessionCreate
 from service.clearance import (
-    MAX_OPENING,
-    PREGRASP_DISTANCE,
     ClearanceConfig,
     approach_is_clear,
     clear_grasps,
@@ -32,7 +31,10 @@ from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
-URDF = Path(__file__).resolve().parents[2] / "sim_worker" / "assets" / "gripper.urdf"
+ROOT = Path(__file__).resolve().parents[2]
+URDF = ROOT / "sim_worker" / "assets" / "gripper.urdf"
+FRANKA = default_gripper()
+MAX_OPENING, PREGRASP_DISTANCE = FRANKA.max_opening, FRANKA.pregrasp_distance
 IDENTITY = np.array([[0.0, 0.0, 0.0, 1.0]])  # grasp frame = the points' frame: +z approach, y closing
 ORIGIN = np.zeros((1, 3))
 #: No margin, tolerance or vetoing count: the bare swept hand.
@@ -146,9 +148,15 @@ def test_no_geometry_or_no_grasps():
 
 
 def test_invalid_settings_are_refused():
-    for bad in ({"margin": -0.001}, {"min_points": 0}, {"opening": 0.1}, {"contact_tolerance": -0.001}):
+    for bad in ({"margin": -0.001}, {"min_points": 0}, {"opening": -0.01}, {"contact_tolerance": -0.001}):
         with pytest.raises(ValueError):
             ClearanceConfig(**bad)
+    for unfit in (
+        {"opening": 0.1},
+        {"contact_tolerance": 0.06},
+    ):  # wider than the hand opens, past the approach
+        with pytest.raises(ValueError, match="franka"):
+            approach_is_clear(np.zeros((3, 3)), ORIGIN, IDENTITY, ClearanceConfig(**unfit))
 
 
 # The hand model is the simulator's ----------------------------------------------------------------
@@ -167,6 +175,7 @@ def urdf_boxes(link: str, joint_position: float) -> list[tuple[np.ndarray, np.nd
 
 
 def test_the_hand_boxes_are_the_urdf_collision_boxes_at_the_max_opening():
+    assert ROOT / FRANKA.urdf == URDF  # the description names the URDF compared here
     expected = [
         *urdf_boxes("palm", 0.0),
         *urdf_boxes("left_finger", MAX_OPENING / 2),
@@ -182,10 +191,9 @@ def test_the_hand_boxes_are_the_urdf_collision_boxes_at_the_max_opening():
 
 def test_the_approach_is_the_executors():
     pytest.importorskip("pybullet")
-    from sim_worker.grasping import PREGRASP_DISTANCE as EXECUTED_PREGRASP
     from sim_worker.gripper import GripperSpec
 
-    assert PREGRASP_DISTANCE == EXECUTED_PREGRASP
+    assert GripperSpec().pregrasp_distance == PREGRASP_DISTANCE
     assert GripperSpec().max_opening == MAX_OPENING  # the executor approaches fully open
 
 

@@ -38,6 +38,7 @@ CONTRACT_CODES = {
     grpc.StatusCode.INVALID_ARGUMENT,
     grpc.StatusCode.NOT_FOUND,
     grpc.StatusCode.ALREADY_EXISTS,
+    grpc.StatusCode.FAILED_PRECONDITION,  # a session for a hand no network of the service serves
     grpc.StatusCode.RESOURCE_EXHAUSTED,
     grpc.StatusCode.UNAVAILABLE,
 }
@@ -150,6 +151,7 @@ REQUESTS: dict[str, st.SearchStrategy] = {
         workspace=WORKSPACES,
         intrinsics=INTRINSICS,
         decay=DOUBLES,
+        gripper=st.sampled_from(["franka", "robotiq-2f85", "no-such-hand", ""]),
     ),
     "GetSession": message(pb.GetSessionRequest, session_id=SESSION_IDS),
     "ListSessions": st.just(pb.ListSessionsRequest()),
@@ -171,6 +173,7 @@ REQUESTS: dict[str, st.SearchStrategy] = {
     "GetGrid": message(pb.GetGridRequest, session_id=SESSION_IDS),
     "GetCloud": message(pb.GetCloudRequest, session_id=SESSION_IDS),
     "GetModelInfo": st.just(pb.GetModelInfoRequest()),
+    "ListGrippers": st.just(pb.ListGrippersRequest()),
 }
 TRACK_MESSAGES = message(
     pb.TrackRequest,

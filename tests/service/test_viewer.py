@@ -14,7 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 
-from client.geometry import FINGER_DEPTH
+from client.gripper_description import default_gripper
 from client.schemas import Grasp
 from service.core import PlanningService
 from service.http_app import create_app
@@ -54,8 +54,8 @@ def test_gripper_outline_has_the_grasp_width_and_finger_depth() -> None:
     left_tip, left_base, right_base, right_tip = (np.array(p) for p in outline[:4])
     assert np.linalg.norm(left_base - right_base) == pytest.approx(0.04)
     # Fingers point along the approach (straight down for this grasp), from the palm.
-    np.testing.assert_allclose(left_tip - left_base, [0, 0, -FINGER_DEPTH], atol=1e-6)
-    np.testing.assert_allclose(right_tip - right_base, [0, 0, -FINGER_DEPTH], atol=1e-6)
+    np.testing.assert_allclose(left_tip - left_base, [0, 0, -default_gripper().finger_depth], atol=1e-6)
+    np.testing.assert_allclose(right_tip - right_base, [0, 0, -default_gripper().finger_depth], atol=1e-6)
     assert outline[4] is None
     assert tilt_degrees(grasp) == 0.0
 
