@@ -136,7 +136,9 @@ def report(args: argparse.Namespace) -> int:
     for look in looks:
         grasps = look["grasps"]
         answered = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
-        measure = measure_grip(look["grid"], voxel_size, grasps[answered, :3], grasps[answered, 3:7])
+        measure = measure_grip(
+            look["grid"], voxel_size, grasps[answered, :3], grasps[answered, 3:7], support=None
+        )
         measured.append((look["outcomes"][answered] == success, measure))
     rows = []
     for alignment in args.alignments:
@@ -166,7 +168,30 @@ def report(args: argparse.Namespace) -> int:
         per_look = [float(np.mean(pick)) for pick in picks]
         grasps = np.mean([len(pick) for pick in picks]) if picks else 0.0
         print(f"{preferred:19.2f} | {len(picks):5d} | {_percent(per_look):>18} | {grasps:15.1f}")
+    print()
+    support_report(looks, voxel_size)
     return 0
+
+
+def support_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
+    """Print what judging faces by their horizontal normal just above the table (the support
+    plane) changes: the grasps each way passes and grips squarely, and how often they succeeded."""
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    print("clearance-checked grasps | faces near the table judged | passes | success % | square | success %")
+    for low, high in ((DEFAULT_THRESHOLD, 1.01), (0.5, DEFAULT_THRESHOLD)):
+        for label, support in (("as the grid shows them", None), ("by their horizontal normal", "find")):
+            passing, square = [], []
+            for look in looks:
+                grasps = look["grasps"]
+                chosen = (grasps[:, 8] >= low) & (grasps[:, 8] < high) & (grasps[:, 9] > 0)
+                measure = measure_grip(look["grid"], voxel_size, grasps[chosen, :3], grasps[chosen, 3:7],
+                                       support=support)  # fmt: skip
+                held = look["outcomes"][chosen] == success
+                passing += list(held[measure.passes()])
+                square += list(held[measure.square()])
+            band = f"quality {low:.1f}-{min(high, 1.0):.1f}"
+            print(f"{band:24s} | {label:27s} | {len(passing):6d} | {_percent(passing):>9} | "
+                  f"{len(square):6d} | {_percent(square):>9}")  # fmt: skip
 
 
 def _percent(outcomes: list[bool]) -> str:

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
 from service.clearance import approach_is_clear, fingers_inside
-from service.grip import GripConfig, GripMeasure, measure_grip
+from service.grip import GripConfig, GripMeasure, measure_grip, support_height
 from service.hands import active_hand
 
 #: Alternative hand poses tried for a dropped grasp, as (turn about the approach, tilt of the
@@ -69,7 +69,9 @@ def check_grasps(
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     orientations = Rotation.from_quat([g.orientation for g in grasps])
-    clear, measure = _judge(positions, orientations, surface, grid, voxel_size, to_workspace, workspace_size)
+    support = None if grid is None else support_height(grid, voxel_size)  # once for every pose
+    clear, measure = _judge(positions, orientations, surface, grid, voxel_size, to_workspace, workspace_size,
+                            support)  # fmt: skip
     passes = clear & _grip_passes(measure, len(grasps), grip_config)
     chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
     square = np.zeros(len(grasps), dtype=bool) if measure is None else measure.square(grip_config)
@@ -82,7 +84,7 @@ def check_grasps(
         owner, alt_positions, alt_orientations = _alternative_poses(positions[retried], orientations[retried])
         # The grip check first: it is the cheaper one and drops most poses, so the clearance check
         # (the costly one, over every surface point) runs only on the poses it vouches for.
-        alt_measure = _grip_measure(alt_positions, alt_orientations, grid, voxel_size, to_workspace)
+        alt_measure = _grip_measure(alt_positions, alt_orientations, grid, voxel_size, to_workspace, support)
         alt_square = alt_measure.square(grip_config)
         alt_passes = alt_square & (alt_measure.known > 0.0).all(axis=1)  # square implies passing
         vouched = np.flatnonzero(alt_passes)
@@ -108,6 +110,32 @@ def check_grasps(
     return Checked(kept, by_clearance, by_grip, int((alternative & kept_mask).sum()))
 
 
+def passes_checks(
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    surface: np.ndarray | None,
+    grid: np.ndarray | None,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+    workspace_size: float,
+    grip_config: GripConfig = GripConfig(),  # noqa: B008 (frozen: one shared default is safe)
+) -> np.ndarray:
+    """(G,) bool: which grasps (world-frame positions and [x, y, z, w] orientations) pass the
+    chain :func:`check_grasps` starts with, each judged alone in its own pose: clear of
+    ``surface`` with its fingers in the workspace cube, gripping on ``grid`` (None: not run).
+    A teacher labelling what the service would drop asks this."""
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if not len(positions):
+        return np.zeros(0, dtype=bool)
+    to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
+    support = None if grid is None else support_height(grid, voxel_size)
+    rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4))
+    clear, measure = _judge(
+        positions, rotations, surface, grid, voxel_size, to_workspace, workspace_size, support
+    )
+    return clear & _grip_passes(measure, len(positions), grip_config)
+
+
 def _count(check_input: np.ndarray | None, dropped: int) -> int | None:
     return None if check_input is None else dropped
 
@@ -120,12 +148,17 @@ def _judge(
     voxel_size: float,
     to_workspace: np.ndarray,
     workspace_size: float,
+    support: float | None,
 ) -> tuple[np.ndarray, GripMeasure | None]:
     """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
     clear = np.ones(len(positions), dtype=bool)
     if surface is not None:
         clear = _clear(positions, orientations, surface, to_workspace, workspace_size)
-    measure = None if grid is None else _grip_measure(positions, orientations, grid, voxel_size, to_workspace)
+    measure = (
+        None
+        if grid is None
+        else _grip_measure(positions, orientations, grid, voxel_size, to_workspace, support)
+    )
     return clear, measure
 
 
@@ -138,11 +171,11 @@ def _clear(positions: np.ndarray, orientations: Rotation, surface: np.ndarray, t
 
 
 def _grip_measure(positions: np.ndarray, orientations: Rotation, grid: np.ndarray, voxel_size: float,
-                  to_workspace: np.ndarray) -> GripMeasure:  # fmt: skip
+                  to_workspace: np.ndarray, support: float | None) -> GripMeasure:  # fmt: skip
     """The grip check's measure of world-frame grasps on the workspace-frame ``grid``."""
     local_positions = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]
     local = Rotation.from_matrix(to_workspace[:3, :3]) * orientations
-    return measure_grip(grid, voxel_size, local_positions, local.as_quat())
+    return measure_grip(grid, voxel_size, local_positions, local.as_quat(), support=support)
 
 
 def _grip_passes(measure: GripMeasure | None, count: int, config: GripConfig) -> np.ndarray:

@@ -1,20 +1,20 @@
 """Grip check: will the closing fingers meet the observed surface squarely, on both sides?
 
 Most grasps VGN is wrong about in clutter close on an edge, a corner or a slanted face and slip
-out while lifting. This check closes the hand on the fused surface: from each finger's pad,
-rays march along the closing axis through the coarse grid until the TSDF crosses zero, where
-its gradient is the normal the pad meets. Per finger, ``contact`` is the share of rays that
-meet the surface and ``alignment`` the mean cosine between those normals and the closing
-direction; a grasp passes when both fingers reach :class:`GripConfig`'s thresholds, and square
-grips (``preferred_alignment``) are kept over the rest. A finger closing from an unseen side is
-left to the network, and a single-frame volume is not checked (:data:`MIN_GRIP_FRAMES`).
-Frames: docs/conventions.md (the pads of the session's gripper description); figures and
-how the thresholds were chosen: docs/concepts.md, "The grip check".
+out while lifting. This check closes the hand on the fused surface: rays march from each pad
+along the closing axis through the coarse grid to the TSDF's zero crossing, whose gradient is the
+normal the pad meets. Per finger, ``contact`` is the share of rays that meet the surface and
+``alignment`` the mean cosine between those normals and the closing direction; a grasp passes
+when both fingers reach :class:`GripConfig`'s thresholds, and square grips are kept over the
+rest. A finger closing from an unseen side is left to the network, a single-frame volume is not
+checked (:data:`MIN_GRIP_FRAMES`), and just above the table faces are judged by the horizontal
+part of their normal (:func:`support_height`). Frames: docs/conventions.md; thresholds: docs/concepts.md.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.ndimage import map_coordinates
@@ -31,6 +31,11 @@ STEP = 0.002
 #: (``benchmarks.grasp_outcomes --views side``: 138 grasps, 43.5 % successful) the grasps it kept
 #: succeeded 35 % of the time and the ones it dropped 54 %.
 MIN_GRIP_FRAMES = 2
+#: Hit points less than this many voxels above the support plane are judged by the horizontal part
+#: of their normal: the grid blurs a thin object's side faces into the table, tilting them up.
+SUPPORT_BAND_VOXELS = 2.0
+#: The support plane must span at least this share of the workspace's floor to count as one.
+MIN_SUPPORT_SHARE = 0.2
 #: Grid value of the surface: the grid holds (tsdf + 1) / 2 where observed and 0 elsewhere, its
 #: values at voxel centres ``(index + 0.5) * voxel_size``; the surface is at tsdf = 0.
 SURFACE = 0.5
@@ -99,6 +104,7 @@ def measure_grip(
     positions: np.ndarray,
     orientations: np.ndarray,
     hand: GripperDescription | None = None,
+    support: float | None | Literal["find"] = "find",
 ) -> GripMeasure:
     """Close the open hand of each grasp on the surface of ``grid``.
 
@@ -108,6 +114,7 @@ def measure_grip(
         positions: (G, 3) grasp origins, workspace frame (m).
         orientations: (G, 4) quaternions [x, y, z, w], grasp frame → workspace frame.
         hand: whose pads close (``pad.contact_x/z``) and from what opening; default the active hand.
+        support: the support plane's height (:func:`support_height`, found when "find").
     """
     hand = hand or active_hand()
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
@@ -145,6 +152,13 @@ def measure_grip(
     first = np.where(met, inside.argmax(axis=-1), len(steps) - 1)  # (G, 2, R)
     hit_points = np.take_along_axis(samples, first[..., None, None], axis=3)[..., 0, :]  # (G, 2, R, 3)
     normals = _surface_normals(grid, voxel_size, hit_points.reshape(-1, 3)).reshape(hit_points.shape)
+    if support == "find":
+        support = support_height(grid, voxel_size)
+    if support is not None:
+        near_support = hit_points[..., 2] < support + SUPPORT_BAND_VOXELS * voxel_size
+        horizontal = normals * np.array([1.0, 1.0, 0.0])
+        horizontal /= np.maximum(np.linalg.norm(horizontal, axis=-1, keepdims=True), 1e-12)
+        normals = np.where(near_support[..., None], horizontal, normals)
     # A pad meets the surface squarely when the normal there points back at the finger (+y side: +y).
     closing_axis = rotations[:, :, 1]  # (G, 3) the grasp frame's y in the workspace frame
     cosine = np.einsum("gsri,gi->gsr", normals, closing_axis) * sides[None, :, None]
@@ -154,6 +168,25 @@ def measure_grip(
     alignment = np.where(met, cosine, 0.0).sum(axis=-1) / hits
     reach = np.where(met, steps[first], half_open).mean(axis=-1)
     return GripMeasure(known.mean(axis=-1), contact, alignment, reach)
+
+
+def support_height(grid: np.ndarray, voxel_size: float) -> float | None:
+    """Height (m, workspace z, which points up) of the plane the scene stands on: the level where
+    most of the surface crosses the vertical, when it spans :data:`MIN_SUPPORT_SHARE` of the floor.
+    None when no level does (no table in view)."""
+    grid = np.asarray(grid, dtype=np.float32)
+    observed = grid > 0.0
+    below, above = grid[:, :, :-1] - SURFACE, grid[:, :, 1:] - SURFACE
+    crossing = observed[:, :, :-1] & observed[:, :, 1:] & (below * above < 0.0)
+    counts = crossing.sum(axis=(0, 1))
+    level = int(np.argmax(counts))
+    if counts[level] < MIN_SUPPORT_SHARE * grid.shape[0] * grid.shape[1]:
+        return None
+    near, far = (
+        np.abs(below[:, :, level][crossing[:, :, level]]),
+        np.abs(above[:, :, level][crossing[:, :, level]]),
+    )
+    return float(np.median(level + 0.5 + near / (near + far)) * voxel_size)
 
 
 def _surface_normals(grid: np.ndarray, voxel_size: float, points: np.ndarray) -> np.ndarray:

@@ -28,9 +28,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from service.clearance import approach_is_clear
+from service.checks import passes_checks
 from service.grid_surface import grid_surface_points
-from service.grip import measure_grip
 from service.planner import GraspPlanner, InferenceOptions
 from service.vgn.checkpoint import weights_id
 from service.vgn.detection import grasp_region
@@ -131,9 +130,9 @@ def failing_checks(
         return failing
     positions = voxel[checked] * voxel_size  # grasp positions sit at index x voxel (docs/conventions.md)
     orientations = quaternion[checked].astype(np.float64)
-    clear = approach_is_clear(grid_surface_points(grid, voxel_size), positions, orientations)
-    grips = measure_grip(grid, voxel_size, positions, orientations).passes()
-    failing[checked] = ~(clear & grips)
+    surface = grid_surface_points(grid, voxel_size)  # the grid is the workspace: its frame is the world's
+    size = grid.shape[0] * voxel_size
+    failing[checked] = ~passes_checks(positions, orientations, surface, grid, voxel_size, np.eye(4), size)
     return failing
 
 
@@ -185,7 +184,7 @@ def _teach_checked_in_parallel(
 
 #: Bump when what a teacher's soft targets mean changes (the turn averaging, the checks, the
 #: grasp region), so that saved targets stop matching.
-TARGETS_FORMAT = 1
+TARGETS_FORMAT = 2
 
 
 def teaching_key(weights: Path, grids: Sequence[object], voxel_sizes: Sequence[float] | None = None) -> str:

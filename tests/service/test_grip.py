@@ -14,11 +14,12 @@ from client.grpc_api import convert
 from client.grpc_client import GRPCClient
 from client.schemas import Grasp, GraspQuery, GraspResult, SessionCreate
 from service.core import PlanningService
-from service.grip import GripConfig, GripMeasure, gripping_grasps, measure_grip
+from service.grip import GripConfig, GripMeasure, gripping_grasps, measure_grip, support_height
 from service.grpc.server import build_server
 from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
-from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from service.tsdf import TSDFVolume
+from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 
 N, SIZE = 40, 0.3
 VOXEL = SIZE / N
@@ -54,10 +55,10 @@ def box(lower, upper) -> Callable[[np.ndarray], np.ndarray]:
     return distance
 
 
-def grip_at(grid: np.ndarray, position, rotation: Rotation = FROM_ABOVE):
+def grip_at(grid: np.ndarray, position, rotation: Rotation = FROM_ABOVE, support="find"):
     """The check's measure of one grasp whose pads sit at ``position`` + 4 cm along the approach."""
     origin = np.asarray(position, dtype=float) - rotation.apply([0.0, 0.0, 0.041])
-    return measure_grip(grid, VOXEL, origin[None], rotation.as_quat()[None])
+    return measure_grip(grid, VOXEL, origin[None], rotation.as_quat()[None], support=support)
 
 
 def test_fingers_closing_on_square_faces_meet_them_squarely():
@@ -286,3 +287,28 @@ def test_a_grip_exactly_at_the_least_contact_and_alignment_passes():
     assert GripMeasure(known, np.nextafter(contact, 0.0), at, reach).passes(config).tolist() == [False]
     square = np.full((1, 2), config.preferred_alignment)
     assert GripMeasure(known, contact, square, reach).kept(config).tolist() == [True]
+
+
+def test_the_support_plane_is_where_most_of_the_surface_lies_flat():
+    table = box((0.0, 0.0, 0.0), (SIZE, SIZE, 0.05))
+    on_table = box((0.10, 0.10, 0.05), (0.16, 0.16, 0.11))
+    assert support_height(grid_of(lambda p: np.minimum(table(p), on_table(p))), VOXEL) == pytest.approx(
+        0.05, abs=1e-3
+    )
+    assert support_height(grid_of(box((0.10, 0.10, 0.10), (0.16, 0.16, 0.16))), VOXEL) is None  # no table
+
+
+def test_a_thin_object_on_the_table_is_judged_by_its_faces_not_the_tables_blur():
+    """A 1.2 cm tile fused from six views: within a voxel or two of the table the grid's gradient
+    tilts its side faces up; judged by the horizontal part of the normal there, a grasp across
+    it grips squarely."""
+    tile = BoxScene(lower=(0.125, 0.1275, TABLE_Z), upper=(0.175, 0.1725, TABLE_Z + 0.012))
+    volume = TSDFVolume(SIZE, N)
+    for pose in circle_views():
+        volume.integrate(tile.depth(pose), INTRINSICS, pose, max_depth=1.5)
+    grid = volume.grid()
+    assert support_height(grid, VOXEL) == pytest.approx(TABLE_Z, abs=1e-3)
+    pads = (0.15, 0.15, TABLE_Z + 0.009)  # fingertips at the table top
+    blurred, judged = grip_at(grid, pads, support=None), grip_at(grid, pads)
+    assert blurred.alignment.min() < 0.7 <= judged.alignment.min()
+    assert judged.square().tolist() == [True]

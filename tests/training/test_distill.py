@@ -12,9 +12,9 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
-from service.clearance import clear_grasps
+from service.checks import check_grasps
 from service.grid_surface import grid_surface_points
-from service.grip import GripConfig, gripping_grasps
+from service.grip import GripConfig
 from service.planner import GraspPlanner, InferenceOptions
 from service.settings import PACKAGED_MODEL
 from service.vgn.checkpoint import card_path, save_vgn, weights_id
@@ -131,8 +131,8 @@ def test_checked_soft_labels_are_zero_exactly_where_the_services_checks_drop_the
         for v, q in zip(plain.voxel[rows].astype(np.float64), quaternion, strict=True)
     ]  # fmt: skip
     alone = GripConfig(preferred_alignment=GripConfig().min_alignment)
-    clear = clear_grasps(grasps, grid_surface_points(grid, VOXEL))
-    kept = gripping_grasps(clear, grid, VOXEL, np.eye(4), alone)
+    surface, size = grid_surface_points(grid, VOXEL), grid.shape[0] * VOXEL
+    kept = check_grasps(grasps, surface, grid, VOXEL, np.eye(4), size, alone, alternatives=False).grasps
     kept_rows = {tuple(g.position) for g in kept}
     service_drops = np.array([tuple(g.position) not in kept_rows for g in grasps])
     quality = np.ones(len(rows))
