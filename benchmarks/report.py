@@ -226,6 +226,12 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                  "(With earlier runs of their default request, which newer results replace in the README's table.)"),
     ("alternatives-", "When a check drops a grasp, do other poses under other rules than the shipped ones "
                       "(any grip, no steps back) find grasps that hold?"),
+    ("support-default-", "What does judging faces just above the table by their horizontal normal do to the "
+                         "default request? (Runs that newer results replace in the README's table.)"),
+    ("table-contact-", "When the fingertips graze the table under a flat object, does a step back or a larger "
+                       "contact tolerance let the checks keep the grasp?"),
+    ("finger-force-70n-", "Does the Franka hand's continuous grasping force (70 N a finger instead of the "
+                          "simulator's 20 N) turn slips into successes?"),
     ("control-before-alternatives-", "Control: the service before other poses and the fallback threshold."),
     ("no-alternatives-", "Control: the fallback threshold without other poses."),
     ("antipodal-", "How does the geometric antipodal baseline do with the same checks and other poses?"),
