@@ -21,10 +21,11 @@ the weights the fingers must carry are plausible.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,7 @@ from client.connect import connect
 from client.embedded import EmbeddedService
 from client.geometry import matrix_from_pose
 from sim_worker.clutter import MAX_CONSECUTIVE_FAILURES, ClutterConfig, ClutterRemoval
-from sim_worker.grasping import Outcome, execute_grasp
+from sim_worker.grasping import LIFT_DISTANCE, Outcome, execute_grasp
 from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.results import ResultsFolder
 from sim_worker.world import World
@@ -64,6 +65,8 @@ VARIANTS: dict[str, GripperSpec] = {
 #: The middle of the pads along the approach, in the grasp frame (docs/conventions.md).
 PAD_MIDDLE_Z = 0.041
 MASS_BINS = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, np.inf)
+#: kg/m³: up to water, up to aluminium (2700: denser than glass, ceramic or any plastic), beyond.
+DENSITY_BINS = (0.0, 1000.0, 2700.0, np.inf)
 
 
 @dataclass
@@ -85,6 +88,9 @@ class LiftWatch:
     lost_at: float | None = None  # fraction of the lift done when the object left a finger
     turn_deg: float = 0.0  # the object's rotation in the hand since the first lift step
     slide_mm: float = 0.0  # how far the object's grip point moved in the hand since then
+    #: Per lift step while held: forces and contact points per finger, turn, slide, the centre of
+    #: mass in the grasp frame (mm).
+    steps: list[dict[str, Any]] = field(default_factory=list)
     _start: np.ndarray = field(default_factory=lambda: np.eye(4))  # object in the hand
     _grip: np.ndarray = field(default_factory=lambda: np.zeros(3))  # grip point, object frame
 
@@ -95,7 +101,8 @@ class LiftWatch:
         if self.body is None and not self._begin():
             self.lost_at = 0.0
             return
-        forces = self._finger_forces()
+        contacts = self._finger_contacts()
+        forces = [sum(c[9] for c in points) for points in contacts]
         relative = self._object_in_hand()
         change = relative @ np.linalg.inv(self._start)
         cosine = np.clip((np.trace(change[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
@@ -103,6 +110,9 @@ class LiftWatch:
         grip_now = relative[:3, :3] @ self._grip + relative[:3, 3]
         grip_then = self._start[:3, :3] @ self._grip + self._start[:3, 3]
         self.slide_mm = float(1000 * np.linalg.norm(grip_now - grip_then))
+        self.steps.append({"step": n, "of": count, "forces": [round(f, 1) for f in forces],
+                           "contacts": [len(points) for points in contacts], "turn_deg": round(self.turn_deg, 1),
+                           "slide_mm": round(self.slide_mm, 1), "com_mm": np.round(1000 * relative[:3, 3], 1).tolist()})  # fmt: skip
         if min(forces) <= 0.0:
             self.lost_at = n / count
             return
@@ -115,7 +125,7 @@ class LiftWatch:
             return False
         self.body = min(held)
         self._start = self._object_in_hand()
-        self.start_force = float(np.mean(self._finger_forces()))
+        self.start_force = float(np.mean([sum(c[9] for c in points) for points in self._finger_contacts()]))
         self.min_force = self.start_force
         points = [c[5] for c in self.world.p.getContactPoints(bodyA=self.gripper.body, bodyB=self.body)]
         grip_world = np.mean(np.asarray(points), axis=0)
@@ -135,14 +145,13 @@ class LiftWatch:
         """The held object's mass (kg)."""
         return float(self.world.p.getDynamicsInfo(self.body, -1)[0])
 
-    def _finger_forces(self) -> tuple[float, float]:
+    def _finger_contacts(self) -> list[tuple[Any, ...]]:
+        """Each finger's contact points with the held object (PyBullet's tuples; [9] is the normal force)."""
         p = self.world.p
-        return tuple(  # type: ignore[return-value]
-            float(
-                sum(c[9] for c in p.getContactPoints(bodyA=self.gripper.body, bodyB=self.body, linkIndexA=f))
-            )
+        return [
+            p.getContactPoints(bodyA=self.gripper.body, bodyB=self.body, linkIndexA=f)
             for f in self.gripper.fingers
-        )
+        ]
 
     def _object_in_hand(self) -> np.ndarray:
         return np.linalg.inv(self.gripper.pose()) @ _pose(self.world, self.body)
@@ -162,9 +171,19 @@ def _pose(world: World, body: int) -> np.ndarray:
     return matrix_from_pose(position, orientation)
 
 
-def try_variants(episode: ClutterRemoval, grasp_pose: np.ndarray, variants: list[str]) -> dict[str, Any]:
+#: Told of every trial: look, grasp (index in the answer), variant, its lift watch and outcome.
+OnTrial = Callable[[int, int, str, "LiftWatch", Outcome], None]
+
+
+def try_variants(
+    episode: ClutterRemoval,
+    grasp_pose: np.ndarray,
+    variants: list[str],
+    on_trial: Callable[..., None] | None = None,
+) -> dict[str, Any]:
     """One grasp executed from the current state under each hand variant; the state is restored
-    after each and the shipped hand is put back. Returns outcomes, watches and the held object."""
+    after each and the shipped hand is put back. Returns outcomes, watches and the held object;
+    ``on_trial(variant, watch, outcome)`` is told of each trial."""
     world, gripper = episode.world, episode.gripper
     state = world.save_state()
     row: dict[str, Any] = {"outcomes": {}, "watch": {}}
@@ -174,6 +193,8 @@ def try_variants(episode: ClutterRemoval, grasp_pose: np.ndarray, variants: list
         trial = execute_grasp(world, gripper, grasp_pose, remove_grasped=False, on_lift=watch)
         row["outcomes"][name] = trial.outcome.value
         row["watch"][name] = watch.as_json()
+        if on_trial is not None:
+            on_trial(name, watch, trial.outcome)
         if watch.body is not None and "object" not in row:
             found = world.objects[watch.body]
             row.update(object=found.urdf.stem, mass=round(watch.mass(), 4), scale=round(found.scale, 3))
@@ -183,20 +204,28 @@ def try_variants(episode: ClutterRemoval, grasp_pose: np.ndarray, variants: list
     return row
 
 
-def run_round(episode: ClutterRemoval, round_id: int, variants: list[str]) -> list[dict[str, Any]]:
-    """One round: at every look, each grasp of the default answer under every variant."""
+def run_round(
+    episode: ClutterRemoval,
+    round_id: int,
+    variants: list[str],
+    on_trial: OnTrial | None = None,
+    last_look: int | None = None,
+) -> list[dict[str, Any]]:
+    """One round: at every look (up to ``last_look``), each grasp of the default answer under every
+    variant. Replaying a round replays its history too, which its outcomes depend on."""
     rng = episode.new_scene(round_id)
     world, looks, failures = episode.world, [], 0
     while world.objects and failures < MAX_CONSECUTIVE_FAILURES:
         answer = episode.look(rng).answer.grasps
-        rows = []
-        for grasp in answer:
-            row = try_variants(episode, grasp.as_matrix(), variants)
+        rows, look = [], len(looks)
+        for index, grasp in enumerate(answer):
+            told = None if on_trial is None else functools.partial(on_trial, look, index)
+            row = try_variants(episode, grasp.as_matrix(), variants, told)
             rows.append({"quality": round(grasp.quality, 4), "width": round(grasp.width, 4),
                          "position": [round(v, 5) for v in grasp.position],
                          "orientation": [round(v, 6) for v in grasp.orientation], **row})  # fmt: skip
         looks.append({"objects": len(world.objects), "grasps": rows})
-        if not answer:
+        if not answer or look == last_look:
             break
         trial = execute_grasp(world, episode.gripper, answer[int(rng.integers(len(answer)))].as_matrix())
         failures = 0 if trial.label else failures + 1
@@ -231,6 +260,46 @@ def collect(args: argparse.Namespace) -> int:
     return 0
 
 
+def trace(args: argparse.Namespace) -> int:
+    """Replay a stored round up to one look and print how one grasp's lift goes under each hand."""
+    record = json.loads((args.folder / f"round{args.round:04d}.json").read_text())
+    stored = record["looks"][args.look]["grasps"][args.grasp]
+    config = ClutterConfig(scene=args.scene, objects=args.objects, object_count=args.object_count, rounds=1,
+                           seed=record["seed"], selection="random", turn_average=True, clearance=True, grip=True)  # fmt: skip
+    matches = []
+
+    def show(look: int, grasp: int, variant: str, watch: LiftWatch, outcome: Outcome) -> None:
+        if (look, grasp) != (args.look, args.grasp):
+            return
+        matches.append(outcome.value == stored["outcomes"][variant])
+        print(
+            f"{variant}: {outcome.value} (stored: {stored['outcomes'][variant]}); {json.dumps(watch.as_json())}"
+        )
+        if watch.steps:
+            print(
+                "  lift mm | normal force N (fingers) | contact points | turn deg | slide mm | centre of mass in the hand mm"
+            )
+        for step in watch.steps:
+            if step["step"] % args.every == 0 or step is watch.steps[-1] or step["step"] == 1:
+                lift = 1000 * LIFT_DISTANCE * step["step"] / step["of"]
+                print(f"  {lift:7.0f} | {step['forces']} | {step['contacts']} | {step['turn_deg']:8.1f} | "
+                      f"{step['slide_mm']:8.1f} | {step['com_mm']}")  # fmt: skip
+
+    print(f"round {args.round}, look {args.look}, grasp {args.grasp}: {stored.get('object', 'nothing held')}, "
+          f"{stored.get('mass', 0):.3f} kg, quality {stored['quality']}, width {1000 * stored['width']:.1f} mm")  # fmt: skip
+    with EmbeddedService(log_path=args.folder / "trace-service.log") as service, connect(service.url) as vgn:
+        episode = ClutterRemoval(
+            config, vgn, ResultsFolder(args.folder / "trace-benchmark", config.as_json())
+        )
+        try:
+            run_round(episode, args.round, record["variants"], show, last_look=args.look)
+        finally:
+            episode.close()
+    if not all(matches):
+        print("the replay's outcomes differ from the stored ones: the service or simulator changed")
+    return 0 if matches and all(matches) else 1
+
+
 # Report ---------------------------------------------------------------------------------------
 def load_grasps(folder: Path) -> list[dict[str, Any]]:
     """Every executed grasp of ``folder``'s rounds."""
@@ -241,9 +310,12 @@ def load_grasps(folder: Path) -> list[dict[str, Any]]:
     return grasps
 
 
-def tabulate(grasps: list[dict[str, Any]], variants: list[str]) -> dict[str, Any]:
+def tabulate(
+    grasps: list[dict[str, Any]], variants: list[str], densities: dict[str, float] | None = None
+) -> dict[str, Any]:
     """The figures of a report: each variant's outcomes against the shipped hand's, on the grasps
-    every variant executed."""
+    every variant executed. With ``densities`` (kg/m³ per object at scale 1), slips are also
+    counted by the density an object had in its scene (PyBullet scales the shape, not the mass)."""
     grasps = [g for g in grasps if all(v in g["outcomes"] for v in variants)]
     others = [v for v in variants if v != "shipped"]
     slipped = [g for g in grasps if g["outcomes"]["shipped"] == Outcome.SLIPPED.value]
@@ -254,16 +326,17 @@ def tabulate(grasps: list[dict[str, Any]], variants: list[str]) -> dict[str, Any
             continue
         entry = per_object.setdefault(g["object"], {"mass": g["mass"], "held_at_close": 0, "slipped": 0,
                                                     **{f"held_{v}": 0 for v in others}})  # fmt: skip
+        if densities and g["object"] in densities:
+            entry["density"] = round(densities[g["object"]])
         entry["held_at_close"] += 1
         if g["outcomes"]["shipped"] == Outcome.SLIPPED.value:
             entry["slipped"] += 1
             for v in others:
                 entry[f"held_{v}"] += g["outcomes"][v] == Outcome.SUCCESS.value
-    by_mass = []
-    for low, high in zip(MASS_BINS[:-1], MASS_BINS[1:], strict=True):
-        inside = [g for g in grasps if "object" in g and low <= g["mass"] < high]
-        by_mass.append({"mass_kg": [low, None if np.isinf(high) else high], "held_at_close": len(inside),
-                        "slipped": {v: _count(inside, v, Outcome.SLIPPED) for v in variants}})  # fmt: skip
+    held_something = [g for g in grasps if "object" in g]
+    by_mass = _binned(held_something, [g["mass"] for g in held_something], MASS_BINS, variants)
+    known = [g for g in held_something if densities and g["object"] in densities]
+    scene_density = [densities[g["object"]] / g["scale"] ** 3 for g in known] if densities else []
     return {
         "grasps": len(grasps),
         "outcomes": {v: dict(Counter(g["outcomes"][v] for g in grasps)) for v in variants},
@@ -274,6 +347,7 @@ def tabulate(grasps: list[dict[str, Any]], variants: list[str]) -> dict[str, Any
         "succeeded": len(held),
         "succeeded_then": {v: dict(Counter(g["outcomes"][v] for g in held)) for v in others},
         "by_mass": by_mass,
+        "by_density": _binned(known, scene_density, DENSITY_BINS, variants) if densities else [],
         "objects": dict(sorted(per_object.items(), key=lambda item: (-item[1]["slipped"], item[0]))),
         "lift": {
             "succeeded (shipped)": _watch_summary(held, "shipped"),
@@ -281,6 +355,18 @@ def tabulate(grasps: list[dict[str, Any]], variants: list[str]) -> dict[str, Any
             **{f"slipped (shipped), under {v}": _watch_summary(slipped, v) for v in others},
         },
     }  # fmt: skip
+
+
+def _binned(
+    grasps: list[dict[str, Any]], values: list[float], bins: tuple[float, ...], variants: list[str]
+) -> list[dict[str, Any]]:
+    """Per bin of ``values`` (one per grasp): grasps held at close, and slips under each variant."""
+    rows = []
+    for low, high in zip(bins[:-1], bins[1:], strict=True):
+        inside = [g for g, value in zip(grasps, values, strict=True) if low <= value < high]
+        rows.append({"bin": [low, None if np.isinf(high) else high], "held_at_close": len(inside),
+                     "slipped": {v: _count(inside, v, Outcome.SLIPPED) for v in variants}})  # fmt: skip
+    return rows
 
 
 def _count(grasps: Iterable[dict[str, Any]], variant: str, outcome: Outcome) -> int:
@@ -291,10 +377,11 @@ def _watch_summary(grasps: list[dict[str, Any]], variant: str) -> dict[str, Any]
     """Quartiles of the lift watch's figures over ``grasps`` (those that held at the lift's start)."""
     watches = [g["watch"][variant] for g in grasps if g["watch"].get(variant)]
     summary: dict[str, Any] = {"count": len(watches)}
-    for key in ("start_force", "min_force", "lever_mm", "weight_ratio", "turn_deg", "slide_mm"):
+    for key in ("start_force", "min_force", "lever_mm", "weight_ratio", "turn_deg", "slide_mm", "lost_at"):
         values = [w[key] for w in watches if w[key] is not None and np.isfinite(w[key])]
         if values:
             summary[key] = [round(float(v), 3) for v in np.percentile(values, [25, 50, 75])]
+    summary["lost"] = sum(w["lost_at"] is not None for w in watches)
     masses = [g["mass"] for g in grasps if "mass" in g]
     if masses:
         summary["mass_kg"] = [round(float(v), 4) for v in np.percentile(masses, [25, 50, 75])]
@@ -321,32 +408,49 @@ def render(table: dict[str, Any], top: int = 15) -> str:
         changed = ", ".join(f"{a} → {b} {n}" for a, b, n in table["changed"][v]) or "-"
         lines.append(f"| {v} | {_counts(table['slipped_then'][v])} | {_counts(table['succeeded_then'][v])} | "
                      f"{changed} |")  # fmt: skip
-    lines += ["", "Slips by the held object's mass (grasps that held something when the lift began):", "",
-              f"| mass (kg) | held at close | slipped: {' / '.join(variants)} |", "| --- | ---: | --- |"]  # fmt: skip
-    for entry in table["by_mass"]:
-        low, high = entry["mass_kg"]
-        span = f"{low:g}-{high:g}" if high is not None else f">= {low:g}"
-        lines.append(f"| {span} | {entry['held_at_close']} | "
-                     f"{' / '.join(str(entry['slipped'][v]) for v in variants)} |")  # fmt: skip
+    for key, title, unit in (("by_mass", "mass", "mass (kg)"),
+                             ("by_density", "density in its scene (URDF mass over the scaled collision mesh's "
+                              "volume)", "density (kg/m³)")):  # fmt: skip
+        if not table[key]:
+            continue
+        lines += ["", f"Slips by the held object's {title}; grasps that held something when the lift began:", "",
+                  f"| {unit} | held at close | slipped: {' / '.join(variants)} |", "| --- | ---: | --- |"]  # fmt: skip
+        for entry in table[key]:
+            low, high = entry["bin"]
+            span = f"{low:g}-{high:g}" if high is not None else f">= {low:g}"
+            lines.append(f"| {span} | {entry['held_at_close']} | "
+                         f"{' / '.join(str(entry['slipped'][v]) for v in variants)} |")  # fmt: skip
     lines += ["", f"Objects with the most slips under the shipped hand (of {len(table['objects'])} held at "
               "close):", "",
-              f"| object | mass (kg) | held at close | slipped | of those held by: {' / '.join(others)} |",
-              "| --- | ---: | ---: | ---: | --- |"]  # fmt: skip
+              f"| object | mass (kg) | density (kg/m³) | held at close | slipped | of those held by: "
+              f"{' / '.join(others)} |", "| --- | ---: | ---: | ---: | ---: | --- |"]  # fmt: skip
     for name, entry in list(table["objects"].items())[:top]:
         if not entry["slipped"]:
             break
-        lines.append(f"| {name[:24]} | {entry['mass']:.3f} | {entry['held_at_close']} | {entry['slipped']} | "
+        lines.append(f"| {name[:24]} | {entry['mass']:.3f} | {entry.get('density', '-')} | "
+                     f"{entry['held_at_close']} | {entry['slipped']} | "
                      f"{' / '.join(str(entry[f'held_{v}']) for v in others)} |")  # fmt: skip
     lines += ["", "The lift, quartiles (25 / 50 / 75 %): the fingers' normal force at the first lift step and "
               "its least while held (N, mean of the two fingers), the weight's lever arm about the closing "
               "axis through the grip point (mm), weight / (2 × friction × normal force), and how far the "
               "object turned (degrees) and its grip point slid (mm) in the hand until it was lost or the "
-              "lift ended:", "",
+              "lift ended, and how many were lost with the share of the lift done then:", "",
               "| grasps | count | force N | least force N | lever mm | weight ratio | turn deg | slide mm "
-              "| mass kg |", "| --- | ---: | --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
-    keys = ("start_force", "min_force", "lever_mm", "weight_ratio", "turn_deg", "slide_mm", "mass_kg")
+              "| lost at | mass kg |", "| --- | ---: | --- | --- | --- | --- | --- | --- | --- | --- |"]  # fmt: skip
+    keys = (
+        "start_force",
+        "min_force",
+        "lever_mm",
+        "weight_ratio",
+        "turn_deg",
+        "slide_mm",
+        "lost_at",
+        "mass_kg",
+    )
     for name, summary in table["lift"].items():
         cells = " | ".join(_quartiles(summary.get(key)) for key in keys)
+        cells = cells.replace(" | " + _quartiles(summary.get("lost_at")) + " | ",
+                              f" | {summary['lost']}: {_quartiles(summary.get('lost_at'))} | ", 1)  # fmt: skip
         lines.append(f"| {name} | {summary['count']} | {cells} |")
     return "\n".join(lines) + "\n"
 
@@ -376,7 +480,10 @@ def report(args: argparse.Namespace) -> int:
         print(f"no rounds in {args.folder}")
         return 1
     variants = json.loads(paths[0].read_text())["variants"]
-    table = tabulate(load_grasps(args.folder), variants)
+    densities = None
+    if args.objects is not None:
+        densities = {row["object"]: row["density"] for row in object_masses(args.objects)}
+    table = tabulate(load_grasps(args.folder), variants, densities)
     text = f"{len(paths)} rounds in {args.folder.name}.\n\n" + render(table)
     print(text, end="")
     if args.write is not None:
@@ -467,11 +574,21 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--out", type=Path, required=True)
     show = commands.add_parser("report", help="the shipped hand's outcomes against another hand's")
     show.add_argument("folder", type=Path)
+    show.add_argument("--objects", type=Path, help="the rounds' URDF folder: count slips by density too")
     show.add_argument("--write", type=Path, help="also write report.md and report.json into this folder")
+    replay = commands.add_parser("trace", help="replay one stored grasp and print its lift step by step")
+    replay.add_argument("folder", type=Path)
+    replay.add_argument("--objects", help="the object set the rounds were collected on")
+    replay.add_argument("--scene", choices=["pile", "packed", "blocks"], default="pile")
+    replay.add_argument("--object-count", type=int, default=5)
+    replay.add_argument("--round", type=int, required=True)
+    replay.add_argument("--look", type=int, required=True)
+    replay.add_argument("--grasp", type=int, required=True, help="index in the look's answer")
+    replay.add_argument("--every", type=int, default=5, help="print every this many lift steps")
     weigh = commands.add_parser("masses", help="the objects' masses against their sizes")
     weigh.add_argument("folder", type=Path)
     args = parser.parse_args(argv)
-    return {"collect": collect, "report": report, "masses": masses}[args.command](args)
+    return {"collect": collect, "report": report, "trace": trace, "masses": masses}[args.command](args)
 
 
 if __name__ == "__main__":

@@ -83,7 +83,7 @@ def test_the_report_tabulates_each_hand_against_the_shipped_one():
     assert table["changed"]["franka-70N"] == [["slipped", "success", 1], ["success", "slipped", 1]]
     assert list(table["objects"]) == ["heavy", "light", "can"], "most slips first, then by name"
     assert table["objects"]["light"] == {"mass": 0.05, "held_at_close": 2, "slipped": 1, "held_franka-70N": 0}
-    bins = {tuple(b["mass_kg"]): b for b in table["by_mass"]}
+    bins = {tuple(b["bin"]): b for b in table["by_mass"]}
     assert bins[(0.0, 0.1)]["held_at_close"] == 2 and bins[(0.0, 0.1)]["slipped"] == {
         "shipped": 1,
         "franka-70N": 2,
