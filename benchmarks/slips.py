@@ -62,8 +62,6 @@ VARIANTS: dict[str, GripperSpec] = {
     # borderline grasp can change outcome with no change of hand. This measures that floor.
     "shipped-again": GripperSpec(),
 }
-#: The middle of the pads along the approach, in the grasp frame (docs/conventions.md).
-PAD_MIDDLE_Z = 0.041
 MASS_BINS = (0.0, 0.1, 0.25, 0.5, 1.0, 2.0, np.inf)
 #: kg/m³: up to water, up to aluminium (2700: denser than glass, ceramic or any plastic), beyond.
 DENSITY_BINS = (0.0, 1000.0, 2700.0, np.inf)
@@ -84,7 +82,9 @@ class LiftWatch:
     start_force: float = 0.0  # N, mean over the fingers of the summed normal force, first lift step
     min_force: float = np.inf  # N, the least of that while held
     lever_mm: float = 0.0  # the weight's lever arm about the closing axis through the grip point
-    weight_ratio: float = 0.0  # m g / (2 mu F): at 1 friction just carries the weight
+    weight_ratio: float = (
+        0.0  # m g / (2 mu F), mu the pads' (objects have 1.0): at 1 friction just carries it
+    )
     lost_at: float | None = None  # fraction of the lift done when the object left a finger
     turn_deg: float = 0.0  # the object's rotation in the hand since the first lift step
     slide_mm: float = 0.0  # how far the object's grip point moved in the hand since then
@@ -157,7 +157,7 @@ class LiftWatch:
         return np.linalg.inv(self.gripper.pose()) @ _pose(self.world, self.body)
 
     def as_json(self) -> dict[str, Any]:
-        """The watch's figures, rounded (None where nothing was held)."""
+        """The watch's figures, rounded (empty where nothing was held)."""
         if self.body is None:
             return {}
         return {"start_force": round(self.start_force, 2), "min_force": round(self.min_force, 2),
