@@ -95,6 +95,7 @@ def execute_grasp(
     fast: bool = False,
     on_waypoint: Callable[[int, int], bool] | None = None,
     on_contact: Callable[[], bool] | None = None,
+    on_lift: Callable[[int, int], None] | None = None,
 ) -> GraspTrial:
     """Try a grasp whose frame is ``grasp_pose`` (4×4, world; +z approach, y closing axis).
 
@@ -106,7 +107,8 @@ def execute_grasp(
 
     ``on_waypoint(n, count)`` runs after each 2 mm step of the approach; when it returns True the
     hand stops there, open, and the trial ends ``INTERRUPTED`` (no grasp attempt).
-    ``on_contact()`` runs when the approach stopped on contact; True ends the trial so too."""
+    ``on_contact()`` runs when the approach stopped on contact; True ends the trial so too.
+    ``on_lift(n, count)`` runs after each step of the lift, to watch how a held object is lost."""
     if fast and allow_contact:
         raise ValueError("fast execution sweeps the approach kinematically: it needs allow_contact=False")
     started, first_step = time.perf_counter(), world.sim_time
@@ -145,9 +147,16 @@ def execute_grasp(
     if not closed_on_something:
         missed = Outcome.APPROACH_CONTACT if stopped_on_contact else Outcome.NOTHING_HELD
         return finish(missed, gripper.opening())
+
+    def lifting(n: int, count: int) -> bool:
+        if on_lift is not None:
+            on_lift(n, count)
+        return False  # a lift is never interrupted
+
     gripper.move_to(
-        retreat_pose(grasp_pose), abort_on_contact=False, abort_below_opening=empty if fast else None
-    )
+        retreat_pose(grasp_pose), abort_on_contact=False, abort_below_opening=empty if fast else None,
+        on_waypoint=lifting if on_lift is not None else None,
+    )  # fmt: skip
     width = gripper.opening()
     held = gripper.bodies_between_fingers() & set(world.objects)
     if width <= empty or not held:

@@ -43,6 +43,9 @@ class GripperSpec:
     #: few millimetres under the closing force and grips with an area rather than a point.
     pad_contact_stiffness: float = 3.0e4
     pad_contact_damping: float = 1.0e2
+    #: Torsional friction of the pads about the contact normal (m: torque per newton of normal
+    #: force). PyBullet's default, 0, lets an object pivot freely about the closing axis.
+    pad_spinning_friction: float = 0.0
     hold_force: float = 300.0  # N of the constraint that carries the hand
     close_duration: float = 0.5  # s
     step_length: float = 0.002  # m per motion step
@@ -60,14 +63,7 @@ class Gripper:
         self.interrupted = False  # the last move_to was stopped by its on_waypoint
         names = {p.getJointInfo(self.body, j)[1].decode(): j for j in range(p.getNumJoints(self.body))}
         self.fingers = (names["left_finger_joint"], names["right_finger_joint"])
-        for finger in self.fingers:
-            p.changeDynamics(
-                self.body,
-                finger,
-                lateralFriction=spec.finger_friction,
-                contactStiffness=spec.pad_contact_stiffness,
-                contactDamping=spec.pad_contact_damping,
-            )
+        self.use_spec(spec)
         gear = p.createConstraint(
             self.body,
             self.fingers[0],
@@ -87,6 +83,21 @@ class Gripper:
         self.last_contact_position = np.zeros(3)
         self.steps_per_motion = max(1, round(spec.step_length / spec.speed / world.config.timestep))
         self.park()
+
+    def use_spec(self, spec: GripperSpec) -> None:
+        """Give the hand ``spec``'s pad contact and, from the next reset or close, its finger force:
+        a benchmark compares hands on one saved state. Call it after ``World.restore_state``, which
+        does not restore contact parameters. Motion settings stay those the hand was made with."""
+        self.spec = spec
+        for finger in self.fingers:
+            self.world.p.changeDynamics(
+                self.body,
+                finger,
+                lateralFriction=spec.finger_friction,
+                contactStiffness=spec.pad_contact_stiffness,
+                contactDamping=spec.pad_contact_damping,
+                spinningFriction=spec.pad_spinning_friction,
+            )
 
     # Placement ----------------------------------------------------------------------------
     def reset(self, pose: np.ndarray, opening: float | None = None) -> None:
