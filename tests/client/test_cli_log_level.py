@@ -13,7 +13,7 @@ import pytest
 
 from client.cli import build_parser
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 UNREACHABLE = "http://127.0.0.1:9"  # the discard port: refused at once on a machine without the service
 
 
