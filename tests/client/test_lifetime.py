@@ -1,5 +1,5 @@
 """A child started to end with this process does, however this process ends; it asks for that
-itself after exec (importing ``service``), so Popen needs no ``preexec_fn`` (see client.lifetime)."""
+itself after exec (importing the server's entry, ``service.app``), so Popen needs no ``preexec_fn`` (see client.lifetime)."""
 
 from __future__ import annotations
 
@@ -18,9 +18,7 @@ from tests.helpers.processes import alive, wait_until_gone
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernel feature is Linux's")
 
 #: What the service's process does on start, then waits: prints whether the variable reached it.
-CHILD = (
-    "import os, sys, time, service; print(os.environ.get(sys.argv[1], 'unset'), flush=True); time.sleep(60)"
-)
+CHILD = "import os, sys, time, service.app; print(os.environ.get(sys.argv[1], 'unset'), flush=True); time.sleep(60)"
 
 
 def test_the_child_ends_when_its_parent_is_killed():
@@ -35,7 +33,7 @@ def test_the_child_ends_when_its_parent_is_killed():
     parent = subprocess.Popen([sys.executable, "-c", parent_script], stdout=subprocess.PIPE, text=True)
     try:
         child = int(parent.stdout.readline())
-        # Importing service took the variable out: the service's own children do not inherit it.
+        # Importing the server's entry took the variable out: the service's own children do not inherit it.
         assert parent.stdout.readline().strip() == "unset"
         assert alive(child)
         parent.kill()  # SIGKILL: the parent runs no cleanup
