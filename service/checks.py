@@ -31,8 +31,6 @@ ALTERNATIVES = (
     (0, 20, 0.0), (0, -20, 0.0), (90, 20, 0.0), (90, -20, 0.0),
     (0, 0, 0.01), (90, 0, 0.01), (0, 0, 0.02),
 )  # fmt: skip
-#: The hand turns about this point of the grasp frame (m): the middle of the pads.
-PIVOT = np.array([0.0, 0.0, 0.041])
 #: At most this many dropped grasps (the best ranked) are tried again: each costs
 #: ``len(ALTERNATIVES)`` more checked poses.
 MAX_RETRIED = 6
@@ -201,7 +199,8 @@ def _alternative_poses(
     moved = base * Rotation.concatenate([turns] * count)
     # The pivot stays where it was (p' = p + R c - R' c), then the hand steps back along its approach.
     step_back = np.tile(table[:, 2], count)[:, None] * moved.apply([0.0, 0.0, 1.0])
-    new_positions = positions[owner] + base.apply(PIVOT) - moved.apply(PIVOT) - step_back
+    pivot = np.array([0.0, 0.0, active_hand().pad_middle])  # the hand turns about the middle of its pads
+    new_positions = positions[owner] + base.apply(pivot) - moved.apply(pivot) - step_back
     return owner, new_positions, moved
 
 
