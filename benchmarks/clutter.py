@@ -1,7 +1,7 @@
 r"""Clutter removal for VGN and the antipodal baseline on the same seeds, next to the paper.
 
     python -m benchmarks.clutter --model vgn.safetensors --rounds 100 \
-        --pile-objects ~/vgn-data/objects/pile/heldout --packed-objects ~/vgn-data/objects/packed/heldout
+        --pile-objects objects/pile/heldout --packed-objects objects/packed/heldout
 
 Scenarios (the paper's Table 1): blocks, pile and packed with 5 objects, pile with 10. Blocks
 use the procedural set, which no model trains on; give held-out object folders for pile and
@@ -11,8 +11,11 @@ percent cleared with 95 % Wilson intervals, planning time) is printed and writte
 ``--out``/table.md and table.json, and drawn as a bar chart in table.png.
 
 The grasps asked for are the service's default answer: turn-averaged (VGN) and clearance-checked
-unless its operator turned these off; ``--no-turn-average --no-clearance`` gives the plain
-answer the paper measures. What was used names the folders and labels the rows.
+unless its operator turned these off; ``--no-turn-average --no-clearance --no-grip`` gives the
+plain answer the paper measures. What was used names the folders and labels the rows: a
+scenario's folder ends in -turns, -clearance and -grip for the checks, and in -side or -random
+(``--views``), -dex or -structured-light (``--sensor``), -pose (``--pose-error``), -disturbP,
+-closed and -wrist for the other ways of looking.
 """
 
 from __future__ import annotations
@@ -29,11 +32,12 @@ from typing import TYPE_CHECKING
 from benchmarks.chart import write_chart
 from benchmarks.paper import PAPER_GPD, PAPER_TABLE_1, SCENARIOS
 from benchmarks.report import no_grasp_cell, this_machine
+from client.cli import add_check_switches, add_looking_options, add_ray_option
 from client.embedded import EmbeddedService
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES
-from sim_worker.clear_scene import resolve_planner, service_default, service_runtime
-from sim_worker.clutter import ClutterConfig, ClutterRemoval, looking
+from sim_worker.clear_scene import resolve_planner, run_episode, service_default, service_runtime
+from sim_worker.clutter import ClutterConfig, looking
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
 from vgn_data.files import write_atomically
@@ -69,47 +73,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument(
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
-    parser.add_argument(
-        "--noise", action="store_true", help="Dex-Net depth noise on every view (a real sensor)"
-    )
-    parser.add_argument("--sensor", choices=["dex", "structured-light"],
-                        help="a depth sensor's errors on every view (docs/sensors.md); results go to folders ending in "
-                        "-dex or -structured-light")  # fmt: skip
-    parser.add_argument("--pose-error", action="store_true",
-                        help="each view's camera pose reported with a random error (5 mm, 1 degree); folders end in -pose")  # fmt: skip
-    parser.add_argument(
-        "--clearance",
-        action=argparse.BooleanOptionalAction,
-        help="grasps whose open hand clears the observed surface on its approach, or not (default: the "
-        "service's, on unless its operator turned it off); checked rows are labelled PLANNER+clearance and "
-        "their results go to folders ending in -clearance",
-    )
-    parser.add_argument(
-        "--grip",
-        action=argparse.BooleanOptionalAction,
-        help="grasps whose closing fingers both meet the observed surface squarely, or not (default: the "
-        "service's, on unless its operator turned it off); checked rows are labelled PLANNER+grip and their "
-        "results go to folders ending in -grip",
-    )
-    parser.add_argument(
-        "--turn-average",
-        action=argparse.BooleanOptionalAction,
-        help="VGN scores and orientations averaged over four quarter turns of the grid, or not (default: the "
-        "service's, on unless its operator turned it off); averaged rows are labelled vgn+turns and their "
-        "results go to folders ending in -turns (the antipodal planner is unaffected)",
-    )
-    parser.add_argument("--views", choices=["six", "side", "random"], default="six",
-                        help="six views; one fixed side view (GIGA's protocol); or one view drawn anew for every look "
-                        "(random); folders end in -side or -random")  # fmt: skip
-    parser.add_argument("--disturb", type=float, default=0.0, metavar="P",
-                        help="displace the aimed-at object during the approach with probability P per attempt "
-                        "(docs/closed-loop.md); folders end in -disturbP")  # fmt: skip
-    parser.add_argument("--closed-loop", action="store_true",
-                        help="watch the approach and withdraw when the scene around the grasp changed; folders end in "
-                        "-closed")  # fmt: skip
-    parser.add_argument("--scan", choices=["fixed", "wrist"], default="fixed",
-                        help="look with the fixed views, or a wrist camera's arc that stops once the best grasp is "
-                        "stable; folders end in -wrist")  # fmt: skip
+    add_looking_options(parser)
+    add_check_switches(parser, "; checked rows are labelled PLANNER+CHECK (vgn+turns for turn averaging)")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     parser.add_argument(
         "--torch-threads",
@@ -118,14 +83,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="torch threads of the embedded service (default %(default)s: the simulator shares the CPU, "
         "and on a small CPU more threads than free cores slow the forward down several times)",
     )
-    parser.add_argument(
-        "--ray",
-        nargs="?",
-        const="local",
-        metavar="ADDRESS",
-        help="spread each scenario's rounds over Ray workers: a local Ray instance, or 'auto' / an address "
-        "to join a cluster (needs the ray extra); the results equal a single-process run's",
-    )
+    add_ray_option(parser)
     parser.add_argument("--workers", type=int, help="with --ray: simulator workers (default: one per CPU)")
     parser.add_argument("--out", type=Path, default=Path("results/benchmark"))
     parser.add_argument(
@@ -210,11 +168,7 @@ def run_all(
             summary = ray_pool.run(config, results, progress)
         else:
             config = resolve_planner(config, vgn)
-            episode = ClutterRemoval(config, vgn, ResultsFolder(folder, config.as_json()))
-            try:
-                summary = episode.run()
-            finally:
-                episode.close()
+            summary = run_episode(config, vgn, ResultsFolder(folder, config.as_json()))
         rows.append(
             {
                 **table_row(planner, selection, scenario, config.as_json(), summary),

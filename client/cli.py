@@ -51,7 +51,39 @@ GRIP_HELP = (
 )
 
 
-def _add_switches(parser: argparse.ArgumentParser, recorded: str = "") -> None:
+def add_looking_options(parser: argparse.ArgumentParser) -> None:
+    """How a clutter-removal run sees and disturbs the scene: ``--views``, ``--noise``, ``--sensor``,
+    ``--pose-error``, ``--disturb``, ``--closed-loop`` and ``--scan``. clear-scene and the
+    benchmark (``benchmarks.clutter``) declare them here, once."""
+    parser.add_argument(
+        "--views",
+        choices=["six", "side", "random"],
+        default="six",
+        help="six views on a circle (VGN), a single fixed side view (GIGA), or a single view drawn anew for "
+        "every look (a random point of the upper hemisphere)",
+    )
+    parser.add_argument(
+        "--noise", action="store_true", help="Dex-Net depth noise on every view (robustness runs)"
+    )
+    parser.add_argument("--sensor", choices=["dex", "structured-light"],
+                        help="a depth sensor's errors on every view: Dex-Net noise, or a structured-light camera's "
+                        "(distance-squared noise, shadows, dropouts at edges and steep surfaces, flying pixels, 1 mm "
+                        "steps); see docs/sensors.md")  # fmt: skip
+    parser.add_argument("--pose-error", action="store_true",
+                        help="report each view's camera pose with a random error (5 mm, 1 degree), as a real arm would")  # fmt: skip
+    parser.add_argument("--disturb", type=float, default=0.0, metavar="P",
+                        help="with probability P per attempt, push the aimed-at object a few cm (or drop it onto the "
+                        "pile) during the approach, after the plan (default 0); see docs/closed-loop.md")  # fmt: skip
+    parser.add_argument("--closed-loop", action="store_true",
+                        help="keep looking while approaching (fixed cameras at 10 Hz, the hand filtered out, a session "
+                        "that forgets), re-plan, and re-target or give up when the aimed-at grasp is gone")  # fmt: skip
+    parser.add_argument("--scan", choices=["fixed", "wrist"], default="fixed",
+                        help="look with the fixed --views, or with a wrist camera circling the scene (three frames a third "
+                        "of a turn apart), planning after every frame and stopping once the best grasp is stable "
+                        "(default %(default)s)")  # fmt: skip
+
+
+def add_check_switches(parser: argparse.ArgumentParser, recorded: str = "") -> None:
     """``--clearance/--no-clearance``, ``--grip/--no-grip`` and ``--turn-average/--no-turn-average``;
     left out, each is ``None``: the service's default, which is its best answer."""
     parser.add_argument("--clearance", action=argparse.BooleanOptionalAction, help=CLEARANCE_HELP + recorded)
@@ -110,7 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
-    _add_switches(grasps)
+    add_check_switches(grasps)
 
     view = commands.add_parser(
         "view",
@@ -130,7 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--crop-max", help="'x,y,z' upper crop corner, workspace frame, metres")
     view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
     view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
-    _add_switches(view)
+    add_check_switches(view)
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -227,40 +259,15 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
         f"{ANTIPODAL_DEFAULT_THRESHOLD} for --planner antipodal)",
     )
     clear.add_argument(
-        "--views",
-        choices=["six", "side", "random"],
-        default="six",
-        help="six views on a circle (VGN), a single fixed side view (GIGA), or a single view drawn anew for "
-        "every look (a random point of the upper hemisphere)",
-    )
-    clear.add_argument(
         "--selection",
         choices=["best", "random"],
         default="best",
         help="execute the best grasp, or a random one above threshold (as the paper)",
     )
-    clear.add_argument(
-        "--noise", action="store_true", help="Dex-Net depth noise on every view (robustness runs)"
-    )
-    clear.add_argument("--sensor", choices=["dex", "structured-light"],
-                       help="a depth sensor's errors on every view: Dex-Net noise, or a structured-light camera's "
-                       "(distance-squared noise, shadows, dropouts at edges and steep surfaces, flying pixels, 1 mm "
-                       "steps); see docs/sensors.md")  # fmt: skip
-    clear.add_argument("--pose-error", action="store_true",
-                       help="report each view's camera pose with a random error (5 mm, 1 degree), as a real arm would")  # fmt: skip
     clear.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn",
                        help="the VGN network, or the service's geometric antipodal baseline (no model needed)")  # fmt: skip
-    clear.add_argument("--disturb", type=float, default=0.0, metavar="P",
-                       help="with probability P per attempt, push the aimed-at object a few cm (or drop it onto the "
-                       "pile) during the approach, after the plan (default 0); see docs/closed-loop.md")  # fmt: skip
-    clear.add_argument("--closed-loop", action="store_true",
-                       help="keep looking while approaching (fixed cameras at 10 Hz, the hand filtered out, a session "
-                       "that forgets), re-plan, and re-target or give up when the aimed-at grasp is gone")  # fmt: skip
-    clear.add_argument("--scan", choices=["fixed", "wrist"], default="fixed",
-                       help="look with the fixed --views, or with a wrist camera circling the scene (three frames a third "
-                       "of a turn apart), planning after every frame and stopping once the best grasp is stable "
-                       "(default %(default)s)")  # fmt: skip
-    _add_switches(clear, " (what was used is recorded in config.json)")
+    add_looking_options(clear)
+    add_check_switches(clear, " (what was used is recorded in config.json)")
     clear.add_argument(
         "--results",
         help="results folder (default results/clear-scene-SCENE-seedSEED); an interrupted run resumes there",

@@ -10,6 +10,7 @@ import argparse
 import contextlib
 import dataclasses
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from client.connect import connect
@@ -47,6 +48,24 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     return dataclasses.replace(
         config, model="antipodal", threshold=threshold, turn_average=False, clearance=clearance, grip=grip
     )
+
+
+def run_episode(
+    config: ClutterConfig,
+    vgn: VGNClient,
+    results: ResultsFolder,
+    image_dir: Path | None = None,
+    progress: Callable[[RoundRecord], None] | None = None,
+) -> dict:
+    """Run the rounds of ``config`` that ``results`` does not hold yet through ``vgn``, then close
+    the episode (its service session and simulator) even when a round fails; returns the summary
+    over every finished round. clear-scene, the benchmark and a trained model's evaluation all run
+    their rounds here."""
+    episode = ClutterRemoval(config, vgn, results, image_dir)
+    try:
+        return episode.run(progress)
+    finally:
+        episode.close()
 
 
 def service_default(choice: bool | None, runtime: dict, switch: str) -> bool:
@@ -145,7 +164,6 @@ def _run(config: ClutterConfig, vgn: VGNClient, results: ResultsFolder, image_di
         bar = tqdm(total=max(remaining, 0), unit="round", file=sys.stderr)
     except ImportError:  # pragma: no cover - tqdm ships with the sim extra
         bar = None
-    episode = ClutterRemoval(config, vgn, results, image_dir)
 
     def progress(record: RoundRecord) -> None:
         if bar is not None:
@@ -156,9 +174,7 @@ def _run(config: ClutterConfig, vgn: VGNClient, results: ResultsFolder, image_di
             )
 
     try:
-        summary = episode.run(progress)
+        return run_episode(config, vgn, results, image_dir, progress)
     finally:
-        episode.close()
         if bar is not None:
             bar.close()
-    return summary

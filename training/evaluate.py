@@ -43,8 +43,8 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
     try:
         from client.embedded import EmbeddedService
         from client.http import VGNClient
-        from sim_worker.clear_scene import resolve_planner
-        from sim_worker.clutter import ClutterConfig, ClutterRemoval
+        from sim_worker.clear_scene import resolve_planner, run_episode
+        from sim_worker.clutter import ClutterConfig
         from sim_worker.results import ResultsFolder
     except ImportError as error:
         raise RuntimeError(missing_extra("the executed-grasp evaluation", "sim", error)) from error
@@ -56,11 +56,7 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
         service = EmbeddedService(model=weights, env=env, log_path=results / "service.log")
         vgn = stack.enter_context(VGNClient(stack.enter_context(service).url, timeout=120.0))
         clutter = resolve_planner(clutter, vgn)
-        episode = ClutterRemoval(clutter, vgn, ResultsFolder(results, clutter.as_json()))
-        try:
-            summary = episode.run()
-        finally:
-            episode.close()
+        summary = run_episode(clutter, vgn, ResultsFolder(results, clutter.as_json()))
     settings = dataclasses.asdict(config) | {
         "threshold": clutter.threshold,
         "turn_average": clutter.turn_average,
