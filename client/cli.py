@@ -25,6 +25,8 @@ import tempfile
 import webbrowser
 from collections.abc import Sequence
 from pathlib import Path
+from types import UnionType
+from typing import Literal, get_args, get_origin
 
 import httpx
 
@@ -33,7 +35,7 @@ from client.embedded import bind_error
 from client.extras import missing_extra
 from client.http import DEFAULT_URL, InvalidRequest, VGNClient, VGNError
 from client.log_level import add_log_level_option, configure_logging
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspQuery
 
 TURN_AVERAGE_HELP = (
     "score and orient grasps by the network's outputs averaged over four quarter turns of the grid, or not "
@@ -81,6 +83,36 @@ def add_looking_options(parser: argparse.ArgumentParser) -> None:
                         help="look with the fixed --views, or with a wrist camera circling the scene (three frames a third "
                         "of a turn apart), planning after every frame and stopping once the best grasp is stable "
                         "(default %(default)s)")  # fmt: skip
+
+
+def add_query_options(parser: argparse.ArgumentParser, max_grasps: int) -> None:
+    """One flag per grasp query option (``client.schemas.GraspQuery``), derived from its fields:
+    choices, types and help as the schema declares them; the switches as :func:`add_check_switches`.
+    ``max_grasps`` is the command's default (``--top`` is its older name)."""
+    for name, field in GraspQuery.model_fields.items():
+        if name in SWITCHES:
+            continue
+        flag, kind = "--" + name.replace("_", "-"), _flag_type(field.annotation)
+        names = (flag, "--top") if name == "max_grasps" else (flag,)
+        default = max_grasps if name == "max_grasps" else None  # None: the service's default
+        if get_origin(kind) is Literal:
+            parser.add_argument(
+                *names, dest=name, choices=get_args(kind), default=default, help=field.description
+            )
+        else:
+            parser.add_argument(*names, dest=name, type=kind, default=default, help=field.description)
+    add_check_switches(parser)
+
+
+def query_options(args: argparse.Namespace) -> dict:
+    """The grasp query options given on the command line (:func:`add_query_options`)."""
+    return {name: getattr(args, name) for name in GraspQuery.model_fields if getattr(args, name) is not None}
+
+
+def _flag_type(annotation: object) -> object:
+    """The type a flag parses to: ``X`` of ``X | None``."""
+    kinds = [kind for kind in get_args(annotation) if kind is not type(None)]
+    return kinds[0] if get_origin(annotation) is UnionType and len(kinds) == 1 else annotation
 
 
 def add_check_switches(parser: argparse.ArgumentParser, recorded: str = "") -> None:
@@ -137,12 +169,8 @@ def build_parser() -> argparse.ArgumentParser:
     grasps = commands.add_parser("grasps", help="plan grasps on a session and print them")
     _add_connection(grasps)
     grasps.add_argument("session_id")
-    grasps.add_argument(
-        "--threshold", type=float, help="minimum quality (default: the model's operating threshold)"
-    )
-    grasps.add_argument("--top", type=int, default=10, help="show at most this many (default %(default)s)")
     grasps.add_argument("--json", action="store_true", help="print the raw JSON answer")
-    add_check_switches(grasps)
+    add_query_options(grasps, max_grasps=10)
 
     view = commands.add_parser(
         "view",
@@ -155,14 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connection(view)
     view.add_argument("session_id")
     view.add_argument("--out", help="save the page to this file instead of opening it")
-    view.add_argument("--planner", choices=["vgn", "antipodal"], default="vgn")
-    view.add_argument("--threshold", type=float, help="minimum quality (default: the planner's)")
-    view.add_argument("--max-grasps", type=int, default=20, help="grasps drawn (default %(default)s)")
-    view.add_argument("--crop-min", help="'x,y,z' lower crop corner, workspace frame, metres")
-    view.add_argument("--crop-max", help="'x,y,z' upper crop corner, workspace frame, metres")
-    view.add_argument("--approach", help="'x,y,z' preferred approach direction, world frame")
-    view.add_argument("--max-approach-angle", type=float, help="degrees around --approach")
-    add_check_switches(view)
+    add_query_options(view, max_grasps=20)
 
     _add_clear_scene(commands)
     _add_generate_data(commands)
@@ -369,14 +390,7 @@ def _sessions(vgn: VGNClient) -> int:
 
 
 def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
-    result = vgn.grasps(
-        args.session_id,
-        threshold=args.threshold,
-        max_grasps=args.top,
-        clearance=args.clearance,
-        grip=args.grip,
-        turn_average=args.turn_average,
-    )
+    result = vgn.grasps(args.session_id, **query_options(args))
     if args.json:
         print(result.model_dump_json(indent=2))
         return 0
@@ -395,22 +409,7 @@ def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
 
 
 def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
-    options = {
-        name: getattr(args, name)
-        for name in (
-            "planner",
-            "threshold",
-            "max_grasps",
-            "crop_min",
-            "crop_max",
-            "approach",
-            "max_approach_angle",
-            "clearance",
-            "grip",
-            "turn_average",
-        )
-        if getattr(args, name) is not None
-    }
+    options = query_options(args)
     try:
         page = vgn.view_page(args.session_id, **options)
     except ValueError as error:  # the options broke GraspQuery's rules before anything was sent

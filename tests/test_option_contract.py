@@ -1,0 +1,43 @@
+"""Every grasp query option is one declaration (``client.schemas.GraspQuery``) that each way of asking
+carries: the gRPC message, the command line's ``grasps`` and ``view``, and, for the switches the
+operator sets defaults for, the service's settings, ``clear-scene`` and the benchmark."""
+
+from __future__ import annotations
+
+import argparse
+
+from benchmarks import clutter
+from client.cli import build_parser
+from client.grpc_api import grasp_planning_pb2 as pb
+from client.schemas import SWITCHES, GraspQuery
+from service.settings import Settings
+
+#: gRPC fields that are not query options: which session the query is about.
+ADDRESSING = {"session_id"}
+
+
+def flags(parser: argparse.ArgumentParser) -> set[str]:
+    return {action.dest for action in parser._actions if action.option_strings}
+
+
+def subcommand(name: str) -> argparse.ArgumentParser:
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return commands.choices[name]
+
+
+def test_the_grpc_query_carries_exactly_the_http_querys_options():
+    grpc_fields = {field.name for field in pb.GraspQuery.DESCRIPTOR.fields} - ADDRESSING
+    assert grpc_fields == set(GraspQuery.model_fields)
+
+
+def test_the_command_lines_grasps_and_view_take_every_query_option():
+    for command in ("grasps", "view"):
+        assert set(GraspQuery.model_fields) <= flags(subcommand(command)), command
+
+
+def test_every_switch_has_a_service_default_and_a_flag_wherever_runs_are_made():
+    assert set(SWITCHES) <= set(Settings.model_fields)
+    assert set(SWITCHES) <= flags(subcommand("clear-scene"))
+    benchmark = clutter.parse_args([])
+    assert set(SWITCHES) <= set(vars(benchmark))
+    assert set(SWITCHES) <= set(GraspQuery.model_fields)
