@@ -35,6 +35,7 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
     assert f"{len(looks)} looks" in report and "min alignment | kept" in report
+    assert "as the grid shows them" in report and "by their horizontal normal" in report
     thresholds, preferences = report.split("preferred alignment |")
     # Each threshold splits the same grasps into kept and dropped ones.
     lines = [line.split("|") for line in thresholds.splitlines() if line.strip().startswith(("0.00", "0.50"))]
@@ -42,7 +43,7 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert len(totals) == 1, "every threshold splits the same grasps"
     # A preference keeps a subset of each look's answer, never none of it.
     (_, looks_all, _, grasps_all), (_, looks_square, _, grasps_square) = [
-        line.split("|") for line in preferences.splitlines()[1:] if line.strip()
+        line.split("|") for line in preferences.split("\n\n")[0].splitlines()[1:] if line.strip()
     ]
     assert int(looks_all) == int(looks_square)
     assert float(grasps_square) <= float(grasps_all)
