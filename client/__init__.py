@@ -1,5 +1,5 @@
 """Typed client for vgn-service: ``VGNClient`` / ``AsyncVGNClient``, ``GRPCClient`` and the
-shared schemas.
+shared schemas, and the robot-side poses of a grasp (``client.robot``).
 
 Installs without torch, open3d or pybullet; ``GRPCClient`` (and ``connect(url)`` for
 ``grpc://`` URLs) needs the ``grpc`` extra, which is imported only when it is first used.
@@ -23,6 +23,7 @@ from client.http import (
     VGNClient,
     VGNError,
 )
+from client.robot import nearest_turn, pregrasp_pose, retreat_pose, tool_offset, tool_pose
 from client.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
 
 if TYPE_CHECKING:
@@ -48,6 +49,11 @@ __all__ = [
     "VGNError",
     "Workspace",
     "connect",
+    "nearest_turn",
+    "pregrasp_pose",
+    "retreat_pose",
+    "tool_offset",
+    "tool_pose",
 ]
 
 
