@@ -1,5 +1,5 @@
-"""The documentation's Python examples that plan on the sample scene run as written, with the
-service's address put in for the one the page shows."""
+"""The documentation's Python examples run as written: those that plan on the sample scene with the
+service's address put in for the one the page shows, and the real-robot page's tool poses."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from client.embedded import EmbeddedService
 
 ROOT = Path(__file__).resolve().parent.parent
 GRPC_PAGE = ROOT / "docs" / "grpc-api.md"
+ROBOT_PAGE = ROOT / "docs" / "real-robot.md"
 
 
 @pytest.fixture(scope="module")
@@ -35,3 +36,16 @@ def test_the_grpc_page_example_runs(service: EmbeddedService):
     lines = run.stdout.splitlines()
     assert re.match(r"4 frames fused in [0-9.]+ ms", lines[0]), run.stdout
     assert len(lines) >= 2, "and at least one grasp"
+
+
+def test_the_real_robot_page_example_runs():
+    """The tool poses of a grasp, with no service: the block that uses the client's robot poses."""
+    blocks = re.findall(r"^```python\n(.*?)^```", ROBOT_PAGE.read_text(), flags=re.S | re.M)
+    example = next(block for block in blocks if "pregrasp_pose(" in block)
+    assert "pyrealsense2" not in example
+    run = subprocess.run(
+        [sys.executable, "-c", example], cwd=ROOT, capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert [line.split()[0] for line in lines] == ["pre-grasp", "grasp", "lift"], run.stdout
