@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp
-from service.clearance import approach_is_clear, fingers_inside
+from service.clearance import ClearanceConfig, approach_is_clear, fingers_inside
 from service.grip import GripConfig, GripMeasure, measure_grip, support_height
 from service.hands import active_hand
 
@@ -31,6 +31,11 @@ ALTERNATIVES = (
     (0, 20, 0.0), (0, -20, 0.0), (90, 20, 0.0), (90, -20, 0.0),
     (0, 0, 0.01), (90, 0, 0.01), (0, 0, 0.02),
 )  # fmt: skip
+#: How far short of the grasp pose (m) the fingertips may meet the support plane, and how close to
+#: it (in voxels) a surface point counts as the plane's: the TSDF places a table within a fraction
+#: of a voxel.
+SUPPORT_CONTACT_TOLERANCE = 0.01
+SUPPORT_BAND_VOXELS = 0.25
 #: At most this many dropped grasps (the best ranked) are tried again: each costs
 #: ``len(ALTERNATIVES)`` more checked poses.
 MAX_RETRIED = 6
@@ -88,7 +93,7 @@ def check_grasps(
         vouched = np.flatnonzero(alt_passes)
         if surface is not None and len(vouched):
             alt_passes[vouched] = _clear(alt_positions[vouched], alt_orientations[vouched], surface, to_workspace,
-                                         workspace_size)  # fmt: skip
+                                         workspace_size, support, voxel_size)  # fmt: skip
         for slot, index in enumerate(retried):
             candidates = np.flatnonzero(alt_passes & (owner == slot))
             if not len(candidates):
@@ -151,7 +156,7 @@ def _judge(
     """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
     clear = np.ones(len(positions), dtype=bool)
     if surface is not None:
-        clear = _clear(positions, orientations, surface, to_workspace, workspace_size)
+        clear = _clear(positions, orientations, surface, to_workspace, workspace_size, support, voxel_size)
     measure = (
         None
         if grid is None
@@ -161,11 +166,24 @@ def _judge(
 
 
 def _clear(positions: np.ndarray, orientations: Rotation, surface: np.ndarray, to_workspace: np.ndarray,
-           workspace_size: float) -> np.ndarray:  # fmt: skip
-    """(G,) bool: the open hand's approach misses ``surface`` and its fingers stay in the cube."""
+           workspace_size: float, support: float | None, voxel_size: float) -> np.ndarray:  # fmt: skip
+    """(G,) bool: the open hand's approach misses ``surface`` and its fingers stay in the cube. The
+    support plane's points may meet the hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the
+    approach: fingertips on the table stop a guarded approach there, around a flat object."""
     quaternions = orientations.as_quat()
-    clear = approach_is_clear(surface, positions, quaternions)
+    tolerance = None if support is None else contact_tolerances(surface, to_workspace, support, voxel_size)
+    clear = approach_is_clear(surface, positions, quaternions, point_tolerance=tolerance)
     return clear & fingers_inside(positions, quaternions, to_workspace, workspace_size)
+
+
+def contact_tolerances(
+    surface: np.ndarray, to_workspace: np.ndarray, support: float, voxel_size: float
+) -> np.ndarray:
+    """(M,) the clearance check's contact tolerance (m) for each surface point (world frame):
+    :data:`SUPPORT_CONTACT_TOLERANCE` on the support plane (``support``, workspace z), the usual elsewhere."""
+    height = surface @ to_workspace[2, :3] + to_workspace[2, 3]  # workspace z: up
+    on_support = np.abs(height - support) < SUPPORT_BAND_VOXELS * voxel_size
+    return np.where(on_support, SUPPORT_CONTACT_TOLERANCE, ClearanceConfig().contact_tolerance)
 
 
 def _grip_measure(positions: np.ndarray, orientations: Rotation, grid: np.ndarray, voxel_size: float,

@@ -101,6 +101,7 @@ def approach_is_clear(
     orientations: np.ndarray,
     config: ClearanceConfig = ClearanceConfig(),
     hand: GripperDescription | None = None,
+    point_tolerance: np.ndarray | None = None,
 ) -> np.ndarray:
     """Which grasps the open ``hand`` (default: the active one) reaches without touching ``points``.
 
@@ -110,6 +111,7 @@ def approach_is_clear(
         orientations: (G, 4) quaternions [x, y, z, w], grasp frame → the frame of ``points``.
         config: margin, vetoing point count, opening and approach length.
         hand: the gripper description whose boxes are swept; default the active hand.
+        point_tolerance: (M,) contact tolerance (m) per point instead of ``config``'s one.
 
     Returns:
         (G,) bool, True where fewer than ``config.min_points`` points lie in the hand swept
@@ -119,6 +121,9 @@ def approach_is_clear(
     opening, pregrasp_distance = config.approach(hand)
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    tolerance = None if point_tolerance is None else np.asarray(point_tolerance, dtype=np.float64).reshape(-1)
+    if tolerance is not None and len(tolerance) != len(points):
+        raise ValueError(f"{len(tolerance)} contact tolerances for {len(points)} points")
     clear = np.ones(len(positions), dtype=bool)
     if not len(positions) or len(points) < config.min_points:
         return clear
@@ -140,7 +145,8 @@ def approach_is_clear(
         if not len(grasp):
             continue
         in_box = np.einsum("bji,pbj->pbi", box_rotations, local[grasp, point][:, None, :] - centres[None])
-        swept = _segment_hits_box(in_box, direction, halves, config.contact_tolerance, pregrasp_distance)
+        first = config.contact_tolerance if tolerance is None else tolerance[point][:, None]
+        swept = _segment_hits_box(in_box, direction, halves, first, pregrasp_distance)
         intruding[start : start + step] += np.bincount(grasp[swept.any(axis=1)], minlength=len(position))
     return intruding < config.min_points
 
@@ -152,7 +158,7 @@ def _box_corners(centres: np.ndarray, rotations: np.ndarray, halves: np.ndarray)
 
 
 def _segment_hits_box(
-    start: np.ndarray, direction: np.ndarray, halves: np.ndarray, first_u: float, last_u: float
+    start: np.ndarray, direction: np.ndarray, halves: np.ndarray, first_u: float | np.ndarray, last_u: float
 ) -> np.ndarray:
     """Whether ``start + u * direction`` lies in the box ``|x_i| <= halves_i`` for some u in
     [first_u, last_u] (slab test). ``start`` (P, B, 3), ``direction`` and ``halves`` (B, 3); (P, B) bool.

@@ -10,11 +10,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from client.schemas import Grasp, GraspQuery, SessionCreate
-from service.checks import check_grasps
-from service.clearance import clear_grasps
+from service.checks import SUPPORT_CONTACT_TOLERANCE, check_grasps, contact_tolerances
+from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grid_surface import grid_surface_points
-from service.grip import GripConfig, gripping_grasps
+from service.grip import GripConfig, gripping_grasps, support_height
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
@@ -144,3 +144,30 @@ def test_without_the_grip_check_no_other_pose_is_tried():
     assert with_grip.replaced == 1 and len(with_grip.grasps) == 1
     closing = Rotation.from_quat(with_grip.grasps[0].orientation).apply([0.0, 1.0, 0.0])
     assert abs(closing[0]) > 0.97  # turned to close along x, both fingers inside the cube
+
+
+def test_the_fingertips_may_meet_the_table_in_the_last_centimetre_of_the_approach():
+    """Around a flat object a guarded approach stops when the fingertips touch the table: the
+    support plane's points are forgiven in the last centimetre, an object's are not."""
+    table = box((0.0, 0.0, 0.0), (SIZE, SIZE, TABLE_Z))
+    tile = box((0.13, 0.1275, TABLE_Z), (0.17, 0.1725, TABLE_Z + 0.015))
+    grid = grid_of(lambda p: np.minimum(table(p), tile(p)))
+    surface = grid_surface_points(grid, VOXEL)
+    support = support_height(grid, VOXEL)
+    tolerance = contact_tolerances(surface, np.eye(4), support, VOXEL)
+    assert set(np.unique(tolerance)) == {ClearanceConfig().contact_tolerance, SUPPORT_CONTACT_TOLERANCE}
+
+    def clear(
+        depth: float, points=surface, tolerances=tolerance
+    ) -> bool:  # fingertips ``depth`` under the top
+        grasp = grasp_at((0.15, 0.15, TABLE_Z - depth + 0.009))
+        args = ([grasp.position], [grasp.orientation])
+        return bool(approach_is_clear(points, *args, point_tolerance=tolerances)[0])
+
+    assert not clear(0.006, tolerances=None)  # the usual 5 mm: dropped
+    assert clear(0.006)  # on the table within the last centimetre: kept
+    assert not clear(0.015)  # deeper than the tolerance: dropped
+    raised = surface + [0.0, 0.0, 0.02]  # the same points 2 cm up are an object's, not the table's
+    assert not clear(0.006 - 0.02, raised, contact_tolerances(raised, np.eye(4), support, VOXEL))
+    with pytest.raises(ValueError, match="contact tolerances"):
+        clear(0.006, tolerances=tolerance[:-1])
