@@ -113,9 +113,7 @@ def approach_is_clear(
         hand: the gripper description whose boxes are swept; default the active hand.
         point_tolerance: (M,) contact tolerance (m) per point instead of ``config``'s one.
 
-    Returns:
-        (G,) bool, True where fewer than ``config.min_points`` points lie in the hand swept
-        from the pre-grasp pose to the grasp pose.
+    Returns (G,) bool: fewer than ``config.min_points`` points in the hand swept in from the pre-grasp.
     """
     hand = hand or active_hand()
     opening, pregrasp_distance = config.approach(hand)
