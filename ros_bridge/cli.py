@@ -8,6 +8,19 @@ from client.extras import missing_extra
 from client.lifetime import end_with_parent_if_asked
 
 
+def usage() -> str:
+    """What ``vgn-ros --help`` prints: how to pass parameters, and each one with its default."""
+    from ros_bridge.settings import PARAMETERS
+
+    lines = ["usage: vgn-ros [--ros-args (-p NAME:=VALUE | --params-file FILE) ...]", "",
+             "A ROS 2 node: depth images, camera info and camera poses in; ranked grasps out (docs/ros2.md).",
+             "", "parameters (default):"]  # fmt: skip
+    for name, (default, description) in PARAMETERS.items():
+        shown = "unset" if not isinstance(default, str | int | float | bool | list) else repr(default)
+        lines.append(f"  {name} ({shown}): {description}")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Start rclpy and spin the node; 2 with the reason for a missing extra or a bad parameter."""
     end_with_parent_if_asked()  # started by a test or a launcher that may be killed outright
@@ -19,7 +32,12 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError as error:
         print(missing_extra("vgn-ros", "ros", error), file=sys.stderr)
         return 2
-    rclpy.init(args=sys.argv if argv is None else argv)
+    args = sys.argv if argv is None else argv
+    ours = args[: args.index("--ros-args")] if "--ros-args" in args else args
+    if "-h" in ours or "--help" in ours:
+        print(usage())
+        return 0
+    rclpy.init(args=args)
     try:
         node = BridgeNode()
     except (ValueError, ImportError) as error:  # a bad parameter; grpc:// without the grpc extra

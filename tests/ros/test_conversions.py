@@ -251,3 +251,11 @@ def test_a_transform_topic_gives_the_pose_of_the_frame_it_names():
     assert poses.at(3.0, "camera_optical").position == [0.0, 0.0, 0.7]
     with pytest.raises(Refused, match="is for frame 'camera_optical', the depth image is in 'wrist_optical'"):
         poses.at(3.0, "wrist_optical")
+
+
+def test_help_lists_every_parameter_and_starts_no_node(capsys):
+    from ros_bridge.cli import main
+
+    assert main(["vgn-ros", "--help"]) == 0
+    shown = capsys.readouterr().out
+    assert shown.startswith("usage: vgn-ros") and all(f"  {name} (" in shown for name in PARAMETERS)
