@@ -69,12 +69,10 @@ def check_grasps(
     drops grasps whose open fingers reach outside the workspace cube (``workspace_size``, m)."""
     if not grasps or (surface is None and grid is None):
         return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0)
-    to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
+    seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size)
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     orientations = Rotation.from_quat([g.orientation for g in grasps])
-    support = None if grid is None else support_height(grid, voxel_size)  # once for every pose
-    clear, measure = _judge(positions, orientations, surface, grid, voxel_size, to_workspace, workspace_size,
-                            support)  # fmt: skip
+    clear, measure = _judge(positions, orientations, seen)
     passes = clear & _grip_passes(measure, len(grasps), grip_config)
     chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
     square = np.zeros(len(grasps), dtype=bool) if measure is None else measure.square(grip_config)
@@ -87,13 +85,12 @@ def check_grasps(
         owner, alt_positions, alt_orientations = _alternative_poses(positions[retried], orientations[retried])
         # The grip check first: it is the cheaper one and drops most poses, so the clearance check
         # (the costly one, over every surface point) runs only on the poses it vouches for.
-        alt_measure = _grip_measure(alt_positions, alt_orientations, grid, voxel_size, to_workspace, support)
+        alt_measure = _grip_measure(alt_positions, alt_orientations, seen)
         alt_square = alt_measure.square(grip_config)
         alt_passes = alt_square & (alt_measure.known > 0.0).all(axis=1)  # square implies passing
         vouched = np.flatnonzero(alt_passes)
         if surface is not None and len(vouched):
-            alt_passes[vouched] = _clear(alt_positions[vouched], alt_orientations[vouched], surface, to_workspace,
-                                         workspace_size, support, voxel_size)  # fmt: skip
+            alt_passes[vouched] = _clear(alt_positions[vouched], alt_orientations[vouched], seen)
         for slot, index in enumerate(retried):
             candidates = np.flatnonzero(alt_passes & (owner == slot))
             if not len(candidates):
@@ -130,12 +127,9 @@ def passes_checks(
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     if not len(positions):
         return np.zeros(0, dtype=bool)
-    to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
-    support = None if grid is None else support_height(grid, voxel_size)
+    seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size)
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4))
-    clear, measure = _judge(
-        positions, rotations, surface, grid, voxel_size, to_workspace, workspace_size, support
-    )
+    clear, measure = _judge(positions, rotations, seen)
     return clear & _grip_passes(measure, len(positions), grip_config)
 
 
@@ -143,37 +137,54 @@ def _count(check_input: np.ndarray | None, dropped: int) -> int | None:
     return None if check_input is None else dropped
 
 
-def _judge(
-    positions: np.ndarray,
-    orientations: Rotation,
+@dataclass(frozen=True)
+class _Observed:
+    """What a request's grasps are judged against, worked out once for all their poses: the world
+    frame surface (None: no clearance check) with each point's contact tolerance, the grid (None:
+    no grip check), the workspace and the support plane's height (None: none found, or no grid)."""
+
+    surface: np.ndarray | None
+    tolerance: np.ndarray | None
+    grid: np.ndarray | None
+    voxel_size: float
+    to_workspace: np.ndarray
+    workspace_size: float
+    support: float | None
+
+
+def _observed(
     surface: np.ndarray | None,
     grid: np.ndarray | None,
     voxel_size: float,
-    to_workspace: np.ndarray,
+    workspace_pose: np.ndarray,
     workspace_size: float,
-    support: float | None,
+) -> _Observed:
+    to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
+    support = None if grid is None else support_height(grid, voxel_size)
+    tolerance = None
+    if surface is not None and support is not None:
+        tolerance = contact_tolerances(surface, to_workspace, support, voxel_size)
+    return _Observed(surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support)
+
+
+def _judge(
+    positions: np.ndarray, orientations: Rotation, seen: _Observed
 ) -> tuple[np.ndarray, GripMeasure | None]:
     """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
     clear = np.ones(len(positions), dtype=bool)
-    if surface is not None:
-        clear = _clear(positions, orientations, surface, to_workspace, workspace_size, support, voxel_size)
-    measure = (
-        None
-        if grid is None
-        else _grip_measure(positions, orientations, grid, voxel_size, to_workspace, support)
-    )
+    if seen.surface is not None:
+        clear = _clear(positions, orientations, seen)
+    measure = None if seen.grid is None else _grip_measure(positions, orientations, seen)
     return clear, measure
 
 
-def _clear(positions: np.ndarray, orientations: Rotation, surface: np.ndarray, to_workspace: np.ndarray,
-           workspace_size: float, support: float | None, voxel_size: float) -> np.ndarray:  # fmt: skip
-    """(G,) bool: the open hand's approach misses ``surface`` and its fingers stay in the cube. The
+def _clear(positions: np.ndarray, orientations: Rotation, seen: _Observed) -> np.ndarray:
+    """(G,) bool: the open hand's approach misses the surface and its fingers stay in the cube. The
     support plane's points may meet the hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the
     approach: fingertips on the table stop a guarded approach there, around a flat object."""
     quaternions = orientations.as_quat()
-    tolerance = None if support is None else contact_tolerances(surface, to_workspace, support, voxel_size)
-    clear = approach_is_clear(surface, positions, quaternions, point_tolerance=tolerance)
-    return clear & fingers_inside(positions, quaternions, to_workspace, workspace_size)
+    clear = approach_is_clear(seen.surface, positions, quaternions, point_tolerance=seen.tolerance)
+    return clear & fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
 
 
 def contact_tolerances(
@@ -186,12 +197,12 @@ def contact_tolerances(
     return np.where(on_support, SUPPORT_CONTACT_TOLERANCE, ClearanceConfig().contact_tolerance)
 
 
-def _grip_measure(positions: np.ndarray, orientations: Rotation, grid: np.ndarray, voxel_size: float,
-                  to_workspace: np.ndarray, support: float | None) -> GripMeasure:  # fmt: skip
-    """The grip check's measure of world-frame grasps on the workspace-frame ``grid``."""
+def _grip_measure(positions: np.ndarray, orientations: Rotation, seen: _Observed) -> GripMeasure:
+    """The grip check's measure of world-frame grasps on the workspace-frame grid."""
+    to_workspace = seen.to_workspace
     local_positions = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]
     local = Rotation.from_matrix(to_workspace[:3, :3]) * orientations
-    return measure_grip(grid, voxel_size, local_positions, local.as_quat(), support=support)
+    return measure_grip(seen.grid, seen.voxel_size, local_positions, local.as_quat(), support=seen.support)
 
 
 def _grip_passes(measure: GripMeasure | None, count: int, config: GripConfig) -> np.ndarray:
