@@ -57,15 +57,18 @@ class Graph:
         self._executor.add_node(self.node)
         self._clients: dict[str, Any] = {}
 
-    def spin_until(self, done: Callable[[], Any], timeout: float, what: str) -> Any:
-        """Spin until ``done()`` is truthy; ``TimeoutError`` saying ``what`` did not happen."""
+    def spin_until(
+        self, done: Callable[[], Any], timeout: float, what: str, log: Callable[[], str] | None = None
+    ) -> Any:
+        """Spin until ``done()`` is truthy; ``TimeoutError`` saying ``what`` did not happen, with
+        ``log()`` (read when it fails) below."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             result = done()
             if result:
                 return result
             self._executor.spin_once(timeout_sec=0.02)
-        raise TimeoutError(f"{what} within {timeout:g} s")
+        raise TimeoutError(f"{what} within {timeout:g} s" + (f":\n{log()}" if log else ""))
 
     def spin_for(self, seconds: float) -> None:
         """Spin for ``seconds``."""

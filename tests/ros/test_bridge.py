@@ -174,7 +174,10 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     for index, (depth, pose) in enumerate(zip(depths, scene["camera_poses"], strict=True)):
         publisher.publish(depth, pose, camera, at=1000.0 + index)
         graph.spin_until(
-            lambda n=index + 1: _frames(vgn, session_id) == n, 30, f"frame {index} was not fused"
+            lambda n=index + 1: _frames(vgn, session_id) == n,
+            30,
+            f"frame {index} was not fused",
+            log=bridge.text,
         )
     answer = graph.call(bridge.topic("plan"))
     assert answer.success, answer.message
@@ -285,9 +288,15 @@ def test_a_bad_parameter_stops_the_node_with_its_name(parameter, value, words, g
 def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn):
     """docs/ros2.md's parameters file, with the test's service and session on top."""
     session_id = f"ros-{uuid.uuid4().hex}"
-    bridge, publisher = start(_camera(scene), PARAMETERS_FILE, service_url=service.url, session_id=session_id)
+    bridge, publisher = start(
+        _camera(scene),
+        PARAMETERS_FILE,
+        wait=5.0,  # a loaded machine may deliver the pose after the image: the frame waits for it
+        service_url=service.url,
+        session_id=session_id,
+    )
     publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at=10.0)
-    graph.spin_until(lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused")
+    graph.spin_until(lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused", log=bridge.text)
     workspace = vgn.session(session_id).workspace
     assert workspace.pose.position == [0.45, -0.15, -0.03] and workspace.size == 0.30
     answer = graph.call(bridge.topic("plan"))
