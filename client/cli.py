@@ -208,7 +208,7 @@ def _add_generate_data(commands: argparse._SubParsersAction[argparse.ArgumentPar
     gen.add_argument(
         "--objects",
         action="append",
-        help="object set ('blocks', 'pybullet') or URDF folder; repeat to mix (default: the scene's set)",
+        help="object set ('blocks', 'shapes', 'pybullet') or URDF folder; repeat to mix (default: the scene's set)",
     )
     gen.add_argument("--scenes", type=int, default=10, help="scenes to generate (default %(default)s)")
     gen.add_argument("--first", type=int, default=0,
@@ -267,7 +267,7 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
                        help="what the table holds: blocks, a pile of objects, or objects packed upright")  # fmt: skip
     clear.add_argument(
         "--objects",
-        help="object set: 'blocks', 'pybullet' or a folder of URDFs (default: the scene's built-in set)",
+        help="object set: 'blocks', 'shapes', 'pybullet' or a folder of URDFs (default: the scene's built-in set)",
     )
     clear.add_argument("--object-count", type=int, default=5, help="objects per round (default %(default)s)")
     clear.add_argument("--rounds", type=int, default=1, help="rounds to run (default %(default)s)")

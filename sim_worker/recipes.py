@@ -6,7 +6,7 @@ observations can be rendered from it later without labelling again; it also keep
 original observation (camera poses, the depth noise's generator state), which is how it is
 checked against the grid that was labelled. Poses are world frame, metres, ``[x, y, z, qx, qy,
 qz, qw]`` (docs/conventions.md). Objects are named by a *reference* ``"<root>:<path>"``
-(``vgn:``, ``pybullet_data:``, ``builtin:``, or ``file:<absolute path>``), so a recipe does
+(``vgn:``, ``pybullet_data:``, ``builtin:``, ``shapes:`` or ``file:<absolute path>``), so a recipe does
 not depend on where a machine keeps its meshes (:func:`object_roots`; data/README.md).
 """
 
@@ -47,7 +47,8 @@ class ObjectFile:
 
 def object_roots(vgn_objects: Path | str | None = None) -> dict[str, Path]:
     """Where each reference root lives on this machine: ``vgn`` from the argument or
-    ``$VGN_OBJECTS`` (absent when neither is set), ``pybullet_data`` and ``builtin``."""
+    ``$VGN_OBJECTS`` (absent when neither is set), ``pybullet_data``, ``builtin`` (the blocks) and
+    ``shapes`` (the generated shapes)."""
     import pybullet_data
 
     from sim_worker.objects import default_cache_dir
@@ -55,6 +56,7 @@ def object_roots(vgn_objects: Path | str | None = None) -> dict[str, Path]:
     roots = {
         "pybullet_data": Path(pybullet_data.getDataPath()),
         "builtin": default_cache_dir() / "blocks",
+        "shapes": default_cache_dir() / "shapes",
     }
     vgn = vgn_objects or os.environ.get("VGN_OBJECTS")
     if vgn:
@@ -90,6 +92,10 @@ def resolve_ref(ref: str, roots: dict[str, Path]) -> Path:
         from sim_worker.objects import write_blocks
 
         write_blocks(roots[name])
+    if name == "shapes" and not path.exists():
+        from sim_worker.shapes import write_shapes
+
+        write_shapes(roots[name])
     if not path.is_file():
         raise RecipeError(f"object {ref!r}: {path} does not exist")
     return path
