@@ -19,13 +19,14 @@ import json
 import multiprocessing
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from training.grids import RESOLUTION
+from training.options import NOT_AN_OPTION, option
 from training.recipe_grids import observation_grid
 from training.recipe_shards import RecipeFolder
 from training.shards import quantize
@@ -54,16 +55,66 @@ class ObservationSettings:
     errors of ``sensor``: ``"dex"`` (Dex-Net noise, ``sim_worker.camera.DepthNoise``) or
     ``"structured-light"`` (``sim_worker.sensors.StructuredLightNoise``; docs/sensors.md).
     ``views="six"`` takes VGN's six evaluation views instead of random ones (no side views).
+    Each field's metadata is also its ``vgn-train`` option (``training.options``); ``max_views`` and
+    ``seed`` have none.
     """
 
-    per_scene: int = 1
-    original: bool = True
-    max_views: int = 6
-    side_view_fraction: float = 0.2
-    noise_fraction: float = 0.5
-    sensor: str = "dex"
-    seed: int = 0
-    views: str = "random"
+    per_scene: int = field(
+        default=1,
+        metadata=option(
+            "data",
+            "recipe folders: observations rendered per scene (cached, see --cache); with K > 1 every "
+            "draw of a scene shows one of them at random (default %(default)s: the original observation only)",
+            flag="--observations",
+            metavar="K",
+        ),
+    )
+    original: bool = field(
+        default=True,
+        metadata=option(
+            "data", "recipe folders: every observation fresh (default: the first is the scene's original one)"
+        ),
+    )
+    max_views: int = field(default=6, metadata=NOT_AN_OPTION)
+    side_view_fraction: float = field(
+        default=0.2,
+        metadata=option(
+            "data",
+            "share of fresh observations that are one side view (default %(default)s)",
+            flag="--observation-side-views",
+            metavar="F",
+        ),
+    )
+    noise_fraction: float = field(
+        default=0.5,
+        metadata=option(
+            "data",
+            "share of fresh observations with Dex-Net depth noise (default %(default)s)",
+            flag="--observation-noise",
+            metavar="F",
+        ),
+    )
+    sensor: str = field(
+        default="dex",
+        metadata=option(
+            "data",
+            "the depth errors of noisy fresh observations: Dex-Net noise or a structured-light camera's "
+            "(docs/sensors.md; default %(default)s)",
+            flag="--observation-sensor",
+            choices=SENSORS,
+        ),
+    )
+    seed: int = field(default=0, metadata=NOT_AN_OPTION)
+    views: str = field(
+        default="random",
+        metadata=option(
+            "data",
+            "where fresh observations' cameras stand: data generation's random views or VGN's six "
+            "evaluation views, the benchmark's; six takes no side views (default %(default)s)",
+            flag="--observation-views",
+            choices=VIEWS,
+        ),
+    )
 
     def __post_init__(self) -> None:
         if self.per_scene < 1 or self.max_views < 1:

@@ -11,6 +11,7 @@ balanced validation loss, and ``patience`` stops a run that no longer improves.
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import shlex
 import sys
@@ -55,6 +56,7 @@ from training.grids import MAX_DEPTH, RESOLUTION
 from training.loss import distillation_loss, gather, per_label_loss
 from training.metrics import THRESHOLD, MetricAccumulator, choose_threshold
 from training.observations import ObservationSettings
+from training.options import option
 from training.recipe_shards import RecipeFolder
 from training.shards import ShardFolder, manifest_summary
 from vgn_data.files import remove_stale_temporaries
@@ -67,64 +69,243 @@ TEACHER_SIX_VIEWS = ObservationSettings(
 )
 
 
+def parse_threshold(text: str) -> float | None:
+    """``--threshold``'s value: a number, or 'auto' (None: chosen on the validation labels)."""
+    if text == "auto":
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1] or 'auto', got {text!r}") from None
+
+
 class TrainingError(Exception):
     """A run cannot start or continue (no data, an existing checkpoint, a bad setting)."""
 
 
 @dataclass
 class TrainConfig:
-    """One training run. Paths: ``data`` raw VGN datasets, ``out`` the ``.safetensors``
-    weights to write (checkpoint and card go beside it)."""
+    """One training run; each field's metadata is also its ``vgn-train`` option (``training.options``).
+    Paths: ``data`` raw VGN datasets, ``out`` the ``.safetensors`` weights to write (checkpoint and
+    card go beside it)."""
 
-    data: list[Path]
-    out: Path
-    epochs: int = 10
-    lr: float = 3e-4
-    batch_scenes: int = 4
-    val_fraction: float = 0.1
-    #: train on this many of the training scenes (a nested subset; validation unchanged): learning curves
-    max_train_scenes: int | None = None
-    #: of recipe folders, only these sources' scenes (None: every source)
-    sources: tuple[str, ...] | None = None
-    seed: int = 0
-    device: str = "auto"
-    cache: Path | None = None
-    workers: int = 0
-    resolution: int = RESOLUTION
-    max_depth: float = MAX_DEPTH
-    #: "height" (quarter-turns and a random height, VGN's), "shift" (quarter-turns and ±4 voxels) or None
-    augment: str | None = "height"
-    #: draws of each training scene per epoch, each with its own augmentation and label subset
-    copies: int = 1
-    #: each draw keeps its scene's positives and as many random negatives
-    balance: bool = True
-    #: stop after this many epochs without a lower balanced validation loss (None: never)
-    patience: int | None = None
-    #: operating threshold written to the card (the service's default for this model);
-    #: None chooses it on the validation labels' real mix to reach ``target_precision``
-    threshold: float | None = None
-    target_precision: float = 0.8
-    #: weights to start from instead of a random initialisation (fine-tuning, e.g. the shipped model)
-    init: Path | None = None
-    #: weights whose turn-averaged output is distilled as soft labels (``training.distill``)
-    teacher: Path | None = None
-    #: weight of the soft-label loss beside the trial labels' (both means over their labels)
-    distill_weight: float = 1.0
-    #: soft labels drawn per scene draw (from the teacher's grasp-region voxels)
-    soft_per_draw: int = 512
-    #: what the teacher sees of each scene: its first observation (the original one unless
-    #: ``observations.original`` is off), or (recipe folders only)
-    #: a clean rendering from VGN's six evaluation views (``TEACHER_SIX_VIEWS``), a view of the
-    #: scene no stored grid holds, whatever the student is shown
-    teacher_views: str = "original"
-    #: the teacher's quality is 0 where the service's clearance or grip check fails
-    #: (``training.distill.failing_checks``)
-    teacher_checks: bool = False
-    #: observations of recipe folders: how many per scene are rendered and how they are drawn
+    data: list[Path] = field(
+        metadata=option("data", "a raw VGN dataset folder; repeat to train on several", metavar="DIR")
+    )
+    out: Path = field(
+        metadata=option(
+            "training",
+            "weights to write; the card and checkpoint go beside it",
+            metavar="FILE.safetensors",
+        )
+    )
+    epochs: int = field(
+        default=10,
+        metadata=option("training", "total epochs of the run (default %(default)s, VGN's)", metavar="N"),
+    )
+    lr: float = field(
+        default=3e-4,
+        metadata=option("training", "Adam learning rate (default %(default)s, VGN's)", metavar="LR"),
+    )
+    batch_scenes: int = field(
+        default=4,
+        metadata=option(
+            "training",
+            "scenes per optimiser step; each brings all its labels (default %(default)s)",
+            metavar="B",
+        ),
+    )
+    val_fraction: float = field(
+        default=0.1,
+        metadata=option(
+            "data", "share of scenes held out for validation (default %(default)s; 0 = none)", metavar="F"
+        ),
+    )
+    max_train_scenes: int | None = field(
+        default=None,
+        metadata=option(
+            "data",
+            "train on N of the training scenes, a subset fixed by --seed and nested across sizes "
+            "(validation unchanged): points of a learning curve (default: all)",
+            flag="--train-scenes",
+            metavar="N",
+        ),
+    )
+    sources: tuple[str, ...] | None = field(
+        default=None,
+        metadata=option(
+            "data",
+            "recipe folders: train on this source's scenes only (e.g. pile-answers; `vgn-data pack --source` "
+            "named it); repeat for several (default: every source)",
+            flag="--source",
+            metavar="NAME",
+        ),
+    )
+    seed: int = field(
+        default=0,
+        metadata=option(
+            "training", "fixes split, order and augmentations (default %(default)s)", metavar="S"
+        ),
+    )
+    device: str = field(
+        default="auto",
+        metadata=option(
+            "machine", "auto = the GPU when there is one (default)", choices=("auto", "cpu", "cuda")
+        ),
+    )
+    cache: Path | None = field(
+        default=None,
+        metadata=option(
+            "data",
+            "where to cache fused grids (default: <data>/.cache/grids-<N>-<key>) and recipe folders' "
+            "rendered observations (default: ~/.cache/vgn-service/observations)",
+            metavar="DIR",
+        ),
+    )
+    workers: int = field(
+        default=0,
+        metadata=option(
+            "machine",
+            "processes fusing grids, loading batches and running the teacher's checks "
+            "(default %(default)s = in this process)",
+            metavar="W",
+        ),
+    )
+    resolution: int = field(
+        default=RESOLUTION,
+        metadata=option(
+            "data", "grid voxels a side (default %(default)s, VGN's; a multiple of 8)", metavar="N"
+        ),
+    )
+    max_depth: float = field(
+        default=MAX_DEPTH,
+        metadata=option(
+            "data",
+            "ignore depth readings beyond this many metres (default %(default)s, as the service)",
+            metavar="M",
+        ),
+    )
+    augment: str | None = field(
+        default="height",
+        metadata=option(
+            "data",
+            "height (default, VGN's): quarter-turns about z and the scene at a random height; "
+            "shift: quarter-turns and z shifts of up to 4 voxels; none",
+            choices=("height", "shift"),
+            none="none",
+            off="--no-augment",
+        ),
+    )
+    copies: int = field(
+        default=1,
+        metadata=option(
+            "data",
+            "draws of each training scene per epoch, each augmented and label-subsampled anew "
+            "(default %(default)s)",
+            metavar="K",
+        ),
+    )
+    balance: bool = field(
+        default=True,
+        metadata=option(
+            "data",
+            "train on every label of a scene (default: each draw keeps the positives and as many negatives)",
+        ),
+    )
+    patience: int | None = field(
+        default=None,
+        metadata=option(
+            "training",
+            "stop after P epochs without a lower balanced validation loss (default: run all epochs); "
+            "the weights written are always the best epoch's",
+            metavar="P",
+        ),
+    )
+    threshold: float | None = field(
+        default=None,
+        metadata=option(
+            "training",
+            "operating threshold written to the card: the service applies it to grasp requests that "
+            "give none. Default 'auto': the lowest threshold whose precision on the validation scenes' "
+            "labels (their real, unbalanced mix) reaches --target-precision. A rerun with --resume and "
+            "the same --epochs only rewrites the card",
+            metavar="T",
+            parse=parse_threshold,
+        ),
+    )
+    target_precision: float = field(
+        default=0.8,
+        metadata=option(
+            "training", "precision that --threshold auto aims for (default %(default)s)", metavar="P"
+        ),
+    )
+    init: Path | None = field(
+        default=None,
+        metadata=option(
+            "training",
+            "start from these weights instead of random ones (fine-tuning; e.g. the shipped model, "
+            "service/models/vgn.safetensors); recorded in the card",
+            metavar="WEIGHTS",
+        ),
+    )
+    #: distilled as soft labels by ``training.distill``
+    teacher: Path | None = field(
+        default=None,
+        metadata=option(
+            "training",
+            "distil these weights' turn-averaged output (quality, orientation, width at every voxel "
+            "where detection may place a grasp) into the trained network as soft labels beside the "
+            "trial labels; usually the same weights as --init",
+            metavar="WEIGHTS",
+        ),
+    )
+    #: both losses are means over their labels
+    distill_weight: float = field(
+        default=1.0,
+        metadata=option(
+            "training",
+            "weight of the soft-label loss against the trial-label loss (default %(default)s)",
+            metavar="W",
+        ),
+    )
+    soft_per_draw: int = field(
+        default=512,
+        metadata=option(
+            "training",
+            "soft labels drawn from a scene each time it is drawn (default %(default)s)",
+            metavar="K",
+        ),
+    )
+    #: "six" is ``TEACHER_SIX_VIEWS``: a view of the scene no stored grid holds, whatever the student is shown
+    teacher_views: str = field(
+        default="original",
+        metadata=option(
+            "training",
+            "what the teacher sees of each scene: its first observation (the original one unless "
+            "--no-original), or (recipe folders) the scene rendered clean from VGN's six evaluation "
+            "views, cached beside the student's observations (default %(default)s)",
+            choices=TEACHER_VIEWS,
+        ),
+    )
+    #: the checks are ``training.distill.failing_checks``
+    teacher_checks: bool = field(
+        default=False,
+        metadata=option(
+            "training",
+            "the teacher's quality is 0 wherever the service's clearance or grip check would drop "
+            "its grasp, so that one plain pass learns what the default request's checks do (best "
+            "with --teacher-views six: the grip check judges volumes fused from several views)",
+        ),
+    )
     observations: ObservationSettings = field(default_factory=ObservationSettings)
-    resume: bool = False
-    fresh: bool = False
-    progress: bool = True
+    resume: bool = field(
+        default=False,
+        metadata=option("training", "continue the run in OUT's checkpoint up to --epochs in total"),
+    )
+    fresh: bool = field(
+        default=False, metadata=option("training", "start over even though a checkpoint exists")
+    )
+    progress: bool = field(default=True, metadata=option("machine", "no progress bars"))
 
     def __post_init__(self) -> None:
         self.check()
