@@ -6,6 +6,7 @@ client; what a frame or a grasp becomes is decided in those plain modules.
 
 from __future__ import annotations
 
+import queue
 import time
 from typing import Any
 
@@ -21,11 +22,12 @@ from visualization_msgs.msg import MarkerArray
 from client.connect import connect
 from client.http import NotFound, VGNError
 from client.recovery import Replay
-from client.schemas import Grasp
+from client.schemas import Grasp, GraspResult
 from ros_bridge import outputs, settings
 from ros_bridge.assemble import Frame, FrameAssembler
 from ros_bridge.poses import FixedPose, PoseSource, TfPoses, TopicPoses
 from ros_bridge.problems import Complaints, Refused
+from ros_bridge.stream import Ended, TrackStream, Update
 
 #: What a call to an unreachable or failing service raises, over HTTP and gRPC.
 SERVICE_ERRORS = (VGNError, httpx.TransportError, ConnectionError, TimeoutError)
@@ -44,8 +46,9 @@ POLL_PERIOD = 0.05
 
 class BridgeNode(Node):
     """Fuses each depth frame into one service session; ``~/plan`` publishes the ranked grasps,
-    ``~/reset`` empties the session, ``~/status`` says what the bridge has. ``ValueError`` at
-    construction names a bad parameter."""
+    ``~/reset`` empties the session, ``~/status`` says what the bridge has. With ``continuous``
+    the frames go through a gRPC ``Track`` stream instead, and the grasps planned after each are
+    published as they come. ``ValueError`` at construction names a bad parameter."""
 
     def __init__(self, name: str = "vgn_bridge", **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
@@ -53,10 +56,15 @@ class BridgeNode(Node):
         self.settings = settings.read(self)
         self.counts = {"received": 0, "fused": 0, "refused": 0}
         self._complaints = Complaints(self.get_logger().warning)
-        self._client = connect(
-            self.settings.service_url, self.settings.api_key, self.settings.timeout, REPLAY
-        )
+        s = self.settings
+        # Frames sent through a stream are not kept to rebuild a lost session: without a replay
+        # a lost session is reported, and a new one opens.
+        self._client = connect(s.service_url, s.api_key, s.timeout, None if s.continuous else REPLAY)
         self._session: str | None = None
+        self._track: TrackStream | None = None
+        self._updates = 0
+        self._last_plan: GraspResult | None = None
+        self._tracking = False  # a stream has planned since the start or since one failed
         self._topic_poses: TopicPoses | None = None
         info_topic = self.resolve_topic_name(INFO_TOPIC)
         self._frames = FrameAssembler(self._pose_source(), info_topic, self.settings.wait)
@@ -72,9 +80,38 @@ class BridgeNode(Node):
         self.create_service(Trigger, "~/reset", self._reset)
         self.create_service(Trigger, "~/status", self._report_status)
         self.create_timer(POLL_PERIOD, self._poll)
+        if s.continuous:
+            self._track = self._open_track()
         self.get_logger().info(
-            f"fusing {self.resolve_topic_name(IMAGE_TOPIC)} into a session on {self.settings.service_url} "
-            f"(camera pose from {self.settings.pose_source})"
+            f"fusing {self.resolve_topic_name(IMAGE_TOPIC)} into a session on {s.service_url} "
+            f"(camera pose from {s.pose_source}"
+            + ("; planning after every frame over a Track stream)" if s.continuous else ")")
+        )
+
+    def _open_track(self) -> TrackStream:
+        """The Track stream, handing its updates to this node's thread through a guard condition."""
+        s = self.settings
+        events: queue.SimpleQueue[Update | Ended] = queue.SimpleQueue()
+
+        def drain() -> None:
+            while True:
+                try:
+                    event = events.get_nowait()
+                except queue.Empty:
+                    return
+                self._on_track(event)
+
+        wake = self.create_guard_condition(drain)
+
+        def deliver(event: Update | Ended) -> None:
+            events.put(event)
+            if self._track is not None:  # None once closed: the guard condition may be gone
+                wake.trigger()
+
+        return TrackStream(
+            lambda: connect(s.service_url, s.api_key, s.timeout, None),
+            deliver,
+            s.grasp_options | {"depth_scale": s.depth_scale, "max_depth": s.max_depth},
         )
 
     def _pose_source(self) -> PoseSource:
@@ -127,6 +164,9 @@ class BridgeNode(Node):
         s = self.settings
         try:
             session = self._session_id()
+            if self._track is not None:
+                self._send(session, frame)
+                return
             self._client.add_frame(
                 session, frame.depth, frame.pose, frame.intrinsics, s.depth_scale, s.max_depth
             )
@@ -135,6 +175,49 @@ class BridgeNode(Node):
             return
         self.counts["fused"] += 1
         self._complaints.clear()
+
+    # Planning continuously.
+
+    def _send(self, session: str, frame: Frame) -> None:
+        """Hand a frame to the Track stream; it counts as fused once its update comes."""
+        assert self._track is not None
+        dropped = self._track.send(session, frame)
+        if dropped:
+            self.counts["refused"] += dropped
+            self._complaints.report(
+                Refused(
+                    "backlog", "the Track stream is behind the camera: the oldest waiting frames are dropped"
+                )
+            )
+
+    def _on_track(self, event: Update | Ended) -> None:
+        """An update of the Track stream is published, unless a reset made it stale; a failed
+        stream is logged once, and opened again by the stream itself."""
+        if self._track is None:  # closed
+            return
+        if isinstance(event, Ended):
+            self.counts["refused"] += event.lost
+            if event.error is not None:
+                problem = self._service_problem(event.error, "ended the Track stream")
+                self._complaints.report(
+                    Refused(
+                        "stream", f"the Track stream ended: {problem}; it opens again with the next frames"
+                    )
+                )
+                self._tracking = False
+            return
+        self.counts["fused"] += 1
+        self._complaints.clear()
+        if event.stream != self._track.stream:
+            return  # planned before a reset
+        self._updates += 1
+        self._last_plan = event.result
+        if not self._tracking:
+            self._tracking = True
+            self.get_logger().info(
+                f"planning continuously on session {self._session}: grasps publish after every frame"
+            )
+        self._publish(event.result.grasps)
 
     # The service.
 
@@ -176,6 +259,11 @@ class BridgeNode(Node):
         response.message = (
             f"session: {session}; {self._counts()}; camera info: {camera}; camera poses: {poses}"
         )
+        if self._track is not None:
+            last = self._last_plan
+            response.message += f"; continuous: {self._updates} plans published" + (
+                f", the last {len(last.grasps)} grasps from {last.frame_count} fused frames" if last else ""
+            )
         return response
 
     def _plan(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -195,6 +283,8 @@ class BridgeNode(Node):
         return response
 
     def _reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if self._track is not None:  # its frames in flight first: none may land after the reset
+            self.counts["refused"] += self._track.stop(self.settings.timeout)
         try:
             self._client.reset_session(self._session_id())
         except SERVICE_ERRORS as error:
@@ -203,6 +293,7 @@ class BridgeNode(Node):
             response.success, response.message = False, str(problem)
             return response
         self._publish([])
+        self._last_plan = None
         response.success, response.message = True, f"session {self._session} emptied"
         return response
 
@@ -213,5 +304,9 @@ class BridgeNode(Node):
         self._markers.publish(outputs.markers(grasps, frame, stamp))
 
     def close(self) -> None:
-        """Close the connection to the service (the session stays on it, to plan from again)."""
+        """Cancel the Track stream, if any, and close the connection to the service (the session
+        stays on it, to plan from again)."""
+        if self._track is not None:
+            track, self._track = self._track, None
+            track.close()
         self._client.close()

@@ -68,6 +68,11 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         Parameter.Type.BOOL,
         "drop grasps whose fingers do not grip squarely; unset: the service's default",
     ),
+    "continuous": (
+        False,
+        "plan after every fused frame over a gRPC Track stream and publish as it goes, "
+        "without ~/plan (needs a grpc:// or grpcs:// service_url)",
+    ),
 }
 
 #: Parameters that are one number: declared so that an integer is taken for it too.
@@ -97,6 +102,7 @@ class Settings:
     max_depth: float
     reliable: bool
     grasp_options: dict[str, Any]
+    continuous: bool
 
 
 def declare(node: Node) -> None:
@@ -142,6 +148,10 @@ def settings_from(values: dict[str, Any]) -> Settings:
     url = values["service_url"] or os.environ.get("VGN_URL") or "http://127.0.0.1:8000"
     if not (url.lower().startswith(("http://", "https://")) or is_grpc_url(url)):
         raise ValueError(f"service_url must start with http://, https://, grpc:// or grpcs://, got {url!r}")
+    if values["continuous"] and not is_grpc_url(url):
+        raise ValueError(
+            f"continuous needs a grpc:// or grpcs:// service_url (the Track stream is gRPC only), got {url!r}"
+        )
     for name in ("timeout", "depth_scale", "max_depth"):
         _number(name, values[name], zero_allowed=False)
     for name in ("pose_tolerance", "wait"):
@@ -174,6 +184,7 @@ def settings_from(values: dict[str, Any]) -> Settings:
         max_depth=float(values["max_depth"]),
         reliable=bool(values["reliable"]),
         grasp_options=_grasp_options(values),
+        continuous=bool(values["continuous"]),
     )
 
 

@@ -22,7 +22,7 @@ from std_msgs.msg import Float32MultiArray  # noqa: E402
 from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
 from client.embedded import EmbeddedService, free_port  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
-from tests.ros.graph import RELIABLE, Bridge, Graph, private_domain  # noqa: E402
+from tests.ros.graph import LATCHED, RELIABLE, Bridge, Graph, private_domain  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "examples" / "sample_scene.npz"
@@ -203,6 +203,141 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     assert np.allclose(scores, [[g.quality, g.width] for g in expected], atol=1e-6)
     assert f"{len(expected)} grasps from 4 fused frames" in answer.message
     assert "4 received, 4 fused, 0 refused" in answer.message
+
+
+def _status_says(graph: Graph, bridge: Bridge, words: str, timeout: float = 30) -> str:
+    """The bridge's status once it says ``words``."""
+    return graph.spin_until(
+        lambda: words in (message := graph.call(bridge.topic("status")).message) and message,
+        timeout,
+        f"the bridge's status did not say {words!r}",
+        log=bridge.text,
+    )
+
+
+def _published(got: dict[str, object]) -> np.ndarray | None:
+    """[x, y, z, qx, qy, qz, qw, quality, width] per published grasp; None before both topics
+    have a message of the same plan."""
+    if "poses" not in got or "scores" not in got:
+        return None
+    poses, scores = got["poses"].poses, np.reshape(got["scores"].data, (-1, 2))
+    if len(poses) != len(scores):
+        return None
+    rows = [[p.position.x, p.position.y, p.position.z] for p in poses]
+    quaternions = [[p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w] for p in poses]
+    return np.hstack([np.reshape(rows, (-1, 3)), np.reshape(quaternions, (-1, 4)), scores])
+
+
+def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
+    service, graph, start, scene, vgn
+):
+    """With ``continuous`` the grasps after every fused frame are published, over a Track
+    stream; after the last frame they are what the Python client plans on the same frames, and a
+    reset ends the stream, clears the grasps and the next frame opens a new one."""
+    camera, workspace = _camera(scene), _workspace(scene)
+    session_id = f"ros-{uuid.uuid4().hex}"
+    bridge, publisher = start(
+        camera,
+        wait=5.0,  # a loaded machine may deliver a pose after its image: a frame waits rather than being refused
+        service_url=service.grpc_url,
+        session_id=session_id,
+        continuous=True,
+        **{"workspace.position": list(workspace.pose.position)},
+        **GRASP_OPTIONS,
+    )
+    got: dict[str, object] = {}
+    graph.node.create_subscription(PoseArray, bridge.topic("grasps"), lambda m: got.update(poses=m), LATCHED)
+    graph.node.create_subscription(
+        Float32MultiArray, bridge.topic("grasp_scores"), lambda m: got.update(scores=m), LATCHED
+    )
+    depths, poses = list(scene["depth_mm"]), scene["camera_poses"]
+    for index, (depth, pose) in enumerate(zip(depths, poses, strict=True)):
+        publisher.publish(depth, pose, camera, at=1000.0 + index)
+        _status_says(graph, bridge, f"{index + 1} plans published, the last")
+    status = _status_says(graph, bridge, "grasps from 4 fused frames")
+    assert "4 received, 4 fused, 0 refused" in status
+
+    with connect(service.grpc_url) as python:
+        own = python.create_session(workspace=workspace).session_id
+        for depth, pose in zip(depths, poses, strict=True):
+            python.add_frame(own, depth, pose, camera)
+        expected = python.grasps(own, **GRASP_OPTIONS).grasps
+        python.delete_session(own)
+    assert expected, "the sample scene has grasps"
+    wanted = np.array([[*g.position, *g.orientation, g.quality, g.width] for g in expected])
+
+    def published_wanted() -> bool:
+        published = _published(got)
+        return (
+            published is not None
+            and published.shape == wanted.shape
+            and np.allclose(published, wanted, atol=1e-6, rtol=0)
+        )
+
+    graph.spin_until(
+        published_wanted,
+        10,
+        f"the published grasps are not the Python client's {wanted}",
+        log=lambda: f"published: {_published(got)}",
+    )
+    assert got["poses"].header.frame_id == "world"
+    assert f"the last {len(expected)} grasps from 4 fused frames" in status
+
+    answer = graph.call(bridge.topic("reset"))
+    assert answer.success, answer.message
+    graph.spin_until(lambda: not got["poses"].poses, 10, "the reset did not clear the grasps")
+    publisher.publish(depths[0], poses[0], camera, at=2000.0)
+    _status_says(graph, bridge, "5 plans published, the last")
+    assert "grasps from 1 fused frames" in _status_says(graph, bridge, "5 fused, 0 refused")
+    assert _frames(vgn, session_id) == 1
+    assert "Traceback" not in bridge.text()
+
+
+def test_a_dropped_track_stream_is_logged_once_and_opened_again(graph, start, scene, tmp_path):
+    """The service restarts under a continuous bridge: the node keeps running, says once that
+    the stream ended, and plans again on a new session once the service is back."""
+    own = EmbeddedService(
+        env={"VGN_TORCH_THREADS": "1"},
+        unset=("VGN_MODEL", "VGN_API_KEY"),
+        log_path=tmp_path / "restarted.log",
+        grpc=True,
+    ).start()
+    try:
+        camera = _camera(scene)
+        bridge, publisher = start(camera, wait=5.0, service_url=own.grpc_url, continuous=True, max_grasps=1)
+        depth, pose = scene["depth_mm"][0], scene["camera_poses"][0]
+        at = iter(range(10, 10_000))
+        publisher.publish(depth, pose, camera, next(at))
+        _status_says(graph, bridge, "1 plans published")
+        own.stop()
+        for _ in range(3):
+            publisher.publish(depth, pose, camera, next(at))
+            graph.spin_for(0.3)
+        graph.spin_until(
+            lambda: "the Track stream ended" in bridge.text(), 30, "no drop was logged", log=bridge.text
+        )
+        own.start()
+
+        def planned_again() -> bool:
+            publisher.publish(depth, pose, camera, next(at))
+            graph.spin_for(0.5)
+            return "2 plans published" in graph.call(bridge.topic("status")).message
+
+        graph.spin_until(planned_again, 60, "the bridge did not plan again", log=bridge.text)
+        assert bridge.process.poll() is None, bridge.text()
+        _assert_logged_once(bridge, "the Track stream ended: the service at")
+        assert bridge.text().count("opened session") == 2, "the restarted service lost the session"
+        assert "Traceback" not in bridge.text()
+    finally:
+        own.stop()
+
+
+def test_continuous_planning_needs_a_grpc_url(graph, tmp_path):
+    parameters = {"continuous": True, "service_url": f"http://127.0.0.1:{free_port()}"}
+    bridge = Bridge("/vgn_test_http", parameters, tmp_path / "http.log")
+    assert bridge.process.wait(timeout=30) == 2
+    bridge.stop()
+    assert "vgn-ros: continuous needs a grpc:// or grpcs:// service_url" in bridge.text()
 
 
 def _refused_twice(graph: Graph, bridge: Bridge) -> str:

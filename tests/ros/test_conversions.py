@@ -175,6 +175,8 @@ def _parameters(**changes):
 
 def test_settings_are_checked_with_the_parameter_named():
     settings = settings_from(_parameters(service_url="grpc://robot:50051", max_grasps=3, clearance=False))
+    assert not settings.continuous
+    assert settings_from(_parameters(service_url="grpcs://robot:443", continuous=True)).continuous
     assert settings.grasp_options == {"planner": "vgn", "max_grasps": 3, "clearance": False}
     assert settings.pose_source == "topic" and settings.workspace.size == 0.30
     assert (
@@ -190,6 +192,10 @@ def test_settings_are_checked_with_the_parameter_named():
         ({"pose_source": "fixed"}, "pose_source fixed needs the camera_pose parameter"),
         ({"pose_source": "gps"}, "pose_source must be one of auto, tf, topic, fixed"),
         ({"workspace.size": -1.0}, "workspace.* parameters are not a valid workspace"),
+        (
+            {"continuous": True, "service_url": "http://robot:8000"},
+            "continuous needs a grpc:// or grpcs:// service_url",
+        ),
     ]:
         with pytest.raises(ValueError, match=words):
             settings_from(_parameters(**changes))
