@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from enum import Enum
 
 from client.extras import missing_extra
 from client.lifetime import end_with_parent_if_asked
@@ -16,7 +17,9 @@ def usage() -> str:
              "A ROS 2 node: depth images, camera info and camera poses in; ranked grasps out (docs/ros2.md).",
              "", "parameters (default):"]  # fmt: skip
     for name, (default, description) in PARAMETERS.items():
-        shown = "unset" if not isinstance(default, str | int | float | bool | list) else repr(default)
+        # An unset parameter's default is its ROS type, an IntEnum: not a value to show.
+        unset = isinstance(default, Enum) or not isinstance(default, str | int | float | bool | list)
+        shown = "unset" if unset else repr(default)
         lines.append(f"  {name} ({shown}): {description}")
     return "\n".join(lines)
 

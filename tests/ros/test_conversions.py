@@ -265,3 +265,4 @@ def test_help_lists_every_parameter_and_starts_no_node(capsys):
     assert main(["vgn-ros", "--help"]) == 0
     shown = capsys.readouterr().out
     assert shown.startswith("usage: vgn-ros") and all(f"  {name} (" in shown for name in PARAMETERS)
+    assert "  grip (unset)" in shown and "Type." not in shown  # a ROS type is no default
