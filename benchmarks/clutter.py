@@ -35,8 +35,8 @@ from benchmarks.report import no_grasp_cell, this_machine
 from client.cli import add_check_switches, add_looking_options, add_ray_option
 from client.embedded import EmbeddedService
 from client.http import VGNClient
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES
-from sim_worker.clear_scene import resolve_planner, run_episode, service_default, service_runtime
+from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspDefaults
+from sim_worker.clear_scene import grasp_defaults, resolve_planner, run_episode
 from sim_worker.clutter import ClutterConfig, looking
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
@@ -94,17 +94,21 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def with_service_defaults(args: argparse.Namespace, runtime: dict | None) -> argparse.Namespace:
+def with_service_defaults(args: argparse.Namespace, defaults: GraspDefaults | None) -> argparse.Namespace:
     """``args`` with ``--clearance``, ``--grip`` and ``--turn-average`` left out replaced by the service's
-    defaults: what its ``/model`` ``runtime`` reports or, with no service to ask (``--report``),
-    what one started here would use (the ``VGN_*`` environment, else the settings' defaults).
-    Folder names and row labels then say what the runs used."""
-    if runtime is None:
+    defaults: what its ``/model`` reports or, with no service to ask (``--report``), what one started
+    here would use (the ``VGN_*`` environment, else the settings' defaults). Folder names and row labels
+    then say what the runs used; ``left_to_service`` names the switches left out, which the runs'
+    requests leave to the service."""
+    if defaults is None:
         from service.settings import Settings
 
-        runtime = Settings().model_dump(include=set(SWITCHES))
-    resolved = {switch: service_default(getattr(args, switch), runtime, switch) for switch in SWITCHES}
-    return argparse.Namespace(**{**vars(args), **resolved})
+        switches = Settings().model_dump(include=set(SWITCHES))
+    else:
+        switches = defaults.model_dump(include=set(SWITCHES))
+    left = frozenset(switch for switch in SWITCHES if getattr(args, switch) is None)
+    resolved = {switch: switches[switch] if switch in left else getattr(args, switch) for switch in SWITCHES}
+    return argparse.Namespace(**{**vars(args), **resolved, "left_to_service": left})
 
 
 def scenario_config(args: argparse.Namespace, planner: str, selection: str, scenario: str) -> ClutterConfig:
@@ -119,6 +123,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
         grip=args.grip, sensor=args.sensor, pose_error=args.pose_error,
         turn_average=args.turn_average if planner == "vgn" else False,
         disturb=args.disturb, closed_loop=args.closed_loop, scan=args.scan,
+        left_to_service=getattr(args, "left_to_service", frozenset()),
     )  # fmt: skip
 
 
@@ -316,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
         if "vgn" in args.planners and not readiness.ready:
             print(f"error: the vgn planner cannot run: {readiness.detail} (pass --model)", file=sys.stderr)
             return 2
-        rows = run_all(with_service_defaults(args, vgn.model().runtime or {}), vgn)
+        rows = run_all(with_service_defaults(args, grasp_defaults(None, vgn)), vgn)
     return write_table(rows, args)
 
 
@@ -332,13 +337,13 @@ def run_on_ray(args: argparse.Namespace) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     try:
-        ready, detail, runtime = pool.prepare(
-            scenario_config(args, "antipodal", "best", args.scenarios[0]), service_runtime
+        ready, detail, defaults = pool.prepare(
+            scenario_config(args, "antipodal", "best", args.scenarios[0]), grasp_defaults
         )
         if "vgn" in args.planners and not ready:
             print(f"error: the vgn planner cannot run: {detail} (pass --model)", file=sys.stderr)
             return 2
-        args = with_service_defaults(args, runtime)
+        args = with_service_defaults(args, defaults)
         from tqdm import tqdm
 
         with tqdm(total=args.rounds * len(list(combinations(args))), unit="round", file=sys.stderr) as bar:

@@ -115,7 +115,7 @@ from benchmarks.workload import (
 )
 from client.embedded import EmbeddedService
 from client.http import FRAME_META_HEADER, VGNClient
-from client.schemas import SWITCHES, FrameMeta, GraspQuery, Pose, SessionCreate
+from client.schemas import SWITCHES, FrameMeta, GraspQuery, ModelInfo, Pose, SessionCreate
 from service.core import PlanningService
 from service.planner import resolve_device, resolve_precision
 from service.runtime import configured_threads
@@ -156,10 +156,13 @@ FORWARD_DETECTION = "forward + detection"
 PLAN = "PlanningService.plan (service default)"
 
 
-def service_defaults(runtime: dict[str, Any]) -> dict[str, bool]:
-    """What a grasp request that does not say gets, from the service's ``/model`` runtime (a
-    service that does not report a switch does not apply it)."""
-    return {switch: bool(runtime.get(switch)) for switch in SWITCHES}
+def service_defaults(model: ModelInfo) -> dict[str, bool]:
+    """The switches a grasp request that does not say gets, as the service's ``/model`` reports them."""
+    if model.defaults is None:
+        raise RuntimeError(
+            "the service does not report the defaults of grasp requests: it is older than this benchmark"
+        )
+    return model.defaults.model_dump(include=set(SWITCHES))
 
 
 def other_options(defaults: dict[str, bool]) -> dict[str, bool]:
@@ -738,19 +741,21 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         running_service(weights, args.threads, args.device) as client,
         running_service(weights, args.threads, args.device) as second,
     ):
-        runtime = client.model().runtime or {}
-        threads = args.threads or runtime.get("torch_threads") or configured_threads()
+        reported = client.model()
+        threads = (
+            args.threads or (reported.runtime and reported.runtime.torch_threads) or configured_threads()
+        )
         torch.set_num_threads(threads)  # the baseline gets the threads the service chose
         args.threads = threads
         core = PlanningService.from_settings(
             Settings(model=weights, torch_threads=threads, device=args.device, api_key=None)
         )
-        threshold = client.model().threshold
+        threshold = reported.threshold
         network, direct_grasps = network_operations(
             weights, resolve_device(args.device), fused_grid(frames), threshold
         )
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery())
-        other = other_options(service_defaults(runtime))
+        other = other_options(service_defaults(reported))
         other_query = GraspQuery(**other)
         plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, other))
         timed_counts: list[int] = []
@@ -781,7 +786,10 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
             with running_service(weights, args.threads, args.device, no_reuse) as batching:
                 concurrency = concurrency_rows(batching.url, frames, args.concurrent_requests)
         model = client.model()
-        runtime = {**(model.runtime or {}), "device": model.device}
+        runtime = {
+            **(model.runtime.model_dump(exclude_none=True) if model.runtime else {}),
+            "device": model.device,
+        }
     total = sum_of(FORWARD_DETECTION, [find(rows, FORWARD), find(rows, DETECTION)], "baseline")
     rows.insert(rows.index(find(rows, DETECTION)) + 1, total)
     for default in (PLAN, GRASPS_HTTP):

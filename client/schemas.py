@@ -292,7 +292,7 @@ class GraspQuery(_Model):
         description="drop grasps whose open hand (fingers at the 0.08 m maximum opening and palm, "
         "franka-v2 dimensions) would touch the observed surface while approaching from 5 cm back "
         "along the approach; applies to both planners, before max_grasps; about 3 ms. Unset: the "
-        "service's default (VGN_CLEARANCE, on unless the operator turned it off; /model runtime says); "
+        "service's default (VGN_CLEARANCE, on unless the operator turned it off; /model defaults says); "
         "false gives the planner's unchecked grasps",
     )
     grip: bool | None = Field(
@@ -302,7 +302,7 @@ class GraspQuery(_Model):
         "average within 60 degrees of the closing direction (service/grip.py); where some grasps meet "
         "normals within about 45 degrees, only those are kept; applies to both planners, before "
         "max_grasps; about 1 ms; not applied to a volume fused from a single frame, which misleads "
-        "it. Unset: the service's default (VGN_GRIP, on unless the operator turned it off; /model runtime "
+        "it. Unset: the service's default (VGN_GRIP, on unless the operator turned it off; /model defaults "
         "says); false gives the planner's unchecked grasps",
     )
     turn_average: bool | None = Field(
@@ -311,7 +311,7 @@ class GraspQuery(_Model):
         "turned by 0, 90, 180 and 270 degrees about the workspace z axis (the turns VGN trains "
         "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 2x the "
         "time of a plain request on 2 CPU cores; widths stay those of the unturned grid. Unset: the "
-        "service's default (VGN_TURN_AVERAGE, on unless the operator turned it off; /model runtime says); "
+        "service's default (VGN_TURN_AVERAGE, on unless the operator turned it off; /model defaults says); "
         "false gives VGN's plain answer",
     )
 
@@ -379,7 +379,8 @@ class Grasp(_Model):
 
 
 class GraspResult(_Model):
-    """The grasps of one request, with the timings and the model and threshold behind them."""
+    """The grasps of one request, with the timings, and the model, threshold and options behind them:
+    what the request asked for or, where it left an option unset, what the service chose."""
 
     grasps: list[Grasp] = Field(description="best first")
     planning_ms: float = Field(description="grid read-out + network + detection on the service")
@@ -396,6 +397,23 @@ class GraspResult(_Model):
     )
     turn_average: bool | None = Field(
         default=None, description="vgn: whether the request was turn-averaged; null for antipodal"
+    )
+    clearance: bool | None = Field(
+        default=None,
+        description="whether the clearance check was on for this request (asked for, or the service's "
+        "default); null only from a service older than this field",
+    )
+    grip: bool | None = Field(
+        default=None,
+        description="whether the grip check was on for this request (asked for, or the service's default); "
+        "on, it still does not run on a volume fused from a single frame (grip_dropped is null then); null "
+        "only from a service older than this field",
+    )
+    fallback: bool | None = Field(
+        default=None,
+        description="whether nothing passed the checks at the default threshold, so that these grasps passed "
+        "the lower fallback threshold (threshold says which; vgn requests that name no threshold only); "
+        "null only from a service older than this field",
     )
 
 
@@ -421,6 +439,79 @@ class GripperList(_Model):
     default: str
 
 
+class GraspDefaults(_Model):
+    """What a grasp request gets for each option it leaves unset: the operator's switches and the
+    thresholds. Each answer says what it used; a client that must know before it asks reads this."""
+
+    turn_average: bool = Field(description="vgn requests are turn-averaged (VGN_TURN_AVERAGE)")
+    clearance: bool = Field(description="requests of both planners are clearance-checked (VGN_CLEARANCE)")
+    grip: bool = Field(
+        description="requests of both planners are grip-checked (VGN_GRIP); never on a volume fused from a "
+        "single frame"
+    )
+    threshold: float = Field(
+        description="vgn's quality threshold: the model card's operating threshold, "
+        f"else {VGN_DEFAULT_THRESHOLD} (VGN's)"
+    )
+    antipodal_threshold: float = Field(description="the antipodal baseline's score threshold")
+    fallback_threshold: float = Field(
+        description="the quality a vgn request that names no threshold and runs a check falls back to when "
+        "nothing passes the checks at threshold (VGN_FALLBACK_THRESHOLD); only where it is below threshold"
+    )
+
+
+class BatchCounts(_Model):
+    """The forward passes the network ran since the service started and the grids they carried."""
+
+    batches: int = Field(description="forward passes run")
+    grids: int = Field(description="grids they carried")
+    largest: int = Field(description="most grids in one forward pass")
+    mean: float = Field(description="grids per forward pass")
+
+
+class MallocSettings(_Model):
+    """Whether the service tuned glibc's allocator, and to what (bytes), or why not."""
+
+    set_by_service: bool = Field(description="whether the service set any of them")
+    reason: str | None = Field(default=None, description="why the service did not, when it did not")
+    mmap_threshold: int | None = Field(default=None, description="freed blocks up to this size are kept")
+    trim_threshold: int | None = Field(default=None, description="the heap top is trimmed beyond this")
+
+
+def _moved_to_defaults(name: str) -> Any:
+    """A request default that ``RuntimeInfo`` still repeats for clients that read it there, for one
+    release: ``ModelInfo.defaults`` holds it now."""
+    return Field(
+        default=None,
+        deprecated=f"read ModelInfo.defaults.{name}",
+        description=f"deprecated, and left out from the next release: read defaults.{name}",
+    )
+
+
+class RuntimeInfo(_Model):
+    """How the network runs: threads and cores, the OpenMP and allocator settings the service chose,
+    the inference form, its precision and micro-batching."""
+
+    torch_threads: int = Field(description="torch intra-op threads")
+    usable_cores: int = Field(description="CPU cores this process may run on")
+    omp_wait_policy: str | None = Field(description="OMP_WAIT_POLICY as the process has it")
+    omp_set_by_service: list[str] = Field(description="the OpenMP variables the service set")
+    omp_applied_before_torch: bool = Field(description="whether they were set before torch loaded OpenMP")
+    malloc: MallocSettings
+    torch: str = Field(description="torch's version")
+    inference: str = Field(description="'fast' (folded for inference) or 'reference' (VGN as trained)")
+    precision: str = Field(description="of the network's weights and activations: bfloat16 or float32")
+    heads: str = Field(description="where rotation and width are computed: 'on-demand' or 'whole'")
+    batch_window_ms: float = Field(description="how long a grasp request waits for others to share its pass")
+    max_batch: int = Field(description="most grids in one forward pass")
+    lanes: int = Field(description="threads that share the grids of one forward pass")
+    batches: BatchCounts
+    turn_average: bool | None = _moved_to_defaults("turn_average")
+    clearance: bool | None = _moved_to_defaults("clearance")
+    grip: bool | None = _moved_to_defaults("grip")
+    fallback_threshold: float | None = _moved_to_defaults("fallback_threshold")
+
+
 class ModelInfo(_Model):
     """The loaded weights (or why none are), where they run, and how they are used."""
 
@@ -433,8 +524,8 @@ class ModelInfo(_Model):
     detail: str | None = Field(default=None, description="why no model is loaded, if none is")
     conventions: dict[str, str]
     threshold: float = Field(
-        description="threshold of grasp requests that give none: the model card's operating threshold, "
-        f"else {VGN_DEFAULT_THRESHOLD} (VGN's)"
+        description="threshold of vgn grasp requests that give none: the model card's operating threshold, "
+        f"else {VGN_DEFAULT_THRESHOLD} (VGN's); defaults.threshold is the same"
     )
     card: dict[str, Any] | None = Field(
         default=None,
@@ -442,11 +533,16 @@ class ModelInfo(_Model):
         "training date, scenes and grasps, epochs, the shipped epoch with its optimizer steps and validation "
         "figures, the executed-grasp result of a clear-scene run, the command that reproduces them",
     )
-    runtime: dict[str, Any] | None = Field(
+    defaults: GraspDefaults | None = Field(
+        default=None,
+        description="what a grasp request gets for each option it leaves unset; null only from a service "
+        "older than this field",
+    )
+    runtime: RuntimeInfo | None = Field(
         default=None,
         description="how the network runs: torch threads, OpenMP wait policy (and whether the service "
-        "set it before torch loaded), inference form, precision, micro-batching window and counts, and "
-        "what a grasp request that does not say gets: turn_average, clearance and grip",
+        "set it before torch loaded), allocator settings, inference form, precision, micro-batching window "
+        "and counts; its turn_average, clearance, grip and fallback_threshold are deprecated (read defaults)",
     )
 
 

@@ -12,14 +12,17 @@ import numpy as np
 
 from client.gripper_description import DEFAULT_GRIPPER
 from client.schemas import (
+    ANTIPODAL_DEFAULT_THRESHOLD,
     FrameMeta,
     FrameResult,
+    GraspDefaults,
     GraspQuery,
     GraspResult,
     GripperInfo,
     GripperList,
     Intrinsics,
     ModelInfo,
+    RuntimeInfo,
     SessionCreate,
     SessionInfo,
 )
@@ -239,10 +242,10 @@ class PlanningService:
         if not baseline and not self.planner.ready:
             raise ModelNotReady(NO_MODEL_MESSAGE)
         clearance = self.settings.clearance if query.clearance is None else query.clearance
-        grip = self.settings.grip if query.grip is None else query.grip
+        grip_on = self.settings.grip if query.grip is None else query.grip
         with self.sessions.use(session_id) as session:
             started = time.perf_counter()
-            grip = grip and session.frame_count >= MIN_GRIP_FRAMES
+            grip = grip_on and session.frame_count >= MIN_GRIP_FRAMES
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
             surface = session.volume.surface_points() if clearance else None
@@ -272,8 +275,9 @@ class PlanningService:
                                self.grip_config, self.settings.alternatives)  # fmt: skip
         floor = self.settings.fallback_threshold
         checks_ran = surface is not None or grid is not None
-        if (not baseline and checks_ran and not checked.grasps and query.threshold is None
-                and floor < threshold):  # fmt: skip
+        fallback = (not baseline and checks_ran and not checked.grasps and query.threshold is None
+                    and floor < threshold)  # fmt: skip
+        if fallback:
             # Nothing passed at the operating threshold: rather than leave the robot with nothing to
             # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
             lower = ranked.model_copy(update={"threshold": floor})
@@ -292,6 +296,9 @@ class PlanningService:
             clearance_dropped=checked.clearance_dropped,
             grip_dropped=checked.grip_dropped,
             turn_average=turn_average,
+            clearance=clearance,
+            grip=grip_on,
+            fallback=fallback,
         )
 
     def _keep_output(self, session_id: str, key: tuple[int, bool], output: object) -> None:
@@ -304,8 +311,25 @@ class PlanningService:
         except SessionNotFound:
             pass
 
+    def grasp_defaults(self) -> GraspDefaults:
+        """What a grasp request gets for each option it leaves unset (``plan`` applies the same)."""
+        return GraspDefaults(
+            turn_average=self.settings.turn_average,
+            clearance=self.settings.clearance,
+            grip=self.settings.grip,
+            threshold=self.planner.default_threshold,
+            antipodal_threshold=ANTIPODAL_DEFAULT_THRESHOLD,
+            fallback_threshold=self.settings.fallback_threshold,
+        )
+
     def model_info(self) -> ModelInfo:
-        """What ``GET /model`` reports: the weights, device, threshold, card and runtime settings."""
+        """What ``GET /model`` reports: the weights, device, threshold, card, request defaults and
+        runtime settings."""
+        defaults = self.grasp_defaults()
+        # The runtime still repeats the defaults it held before they had a model of their own.
+        repeated = defaults.model_dump(
+            include=set(RuntimeInfo.model_fields) & set(GraspDefaults.model_fields)
+        )
         return ModelInfo(
             loaded=self.planner.ready,
             model_id=self.planner.model_id,
@@ -317,12 +341,6 @@ class PlanningService:
             conventions=CONVENTIONS,
             threshold=self.planner.default_threshold,
             card=self.planner.card,
-            runtime={
-                **runtime_report(),
-                **self.planner.runtime(),
-                "turn_average": self.settings.turn_average,
-                "clearance": self.settings.clearance,
-                "grip": self.settings.grip,
-                "fallback_threshold": self.settings.fallback_threshold,
-            },
+            defaults=defaults,
+            runtime=RuntimeInfo.model_validate({**runtime_report(), **self.planner.runtime(), **repeated}),
         )

@@ -16,25 +16,28 @@ from pathlib import Path
 from client.connect import connect
 from client.embedded import EmbeddedService
 from client.http import VGNClient, VGNError
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD
-from sim_worker.clutter import ClutterConfig, ClutterRemoval
+from client.schemas import GraspDefaults
+from sim_worker.clutter import SERVICE_OPTIONS, ClutterConfig, ClutterRemoval, ServiceDefaultsError
 from sim_worker.metrics import summary_table
 from sim_worker.results import ResultsFolder, RoundRecord
 
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     """``config`` with the planner's identity filled in: the weights' id (a resume with other
-    weights is refused), and the threshold, turn averaging, clearance and grip checks actually used
-    when not given (the service's defaults), so that config.json records what was done."""
+    weights is refused), and for the threshold, turn averaging, clearance and grip checks it leaves
+    unset, what the service's ``/model`` defaults say it will use, so that config.json records what
+    is done. Requests still leave those options to the service (``left_to_service``), and each answer
+    is checked against the record."""
     model = vgn.model()
-    runtime = model.runtime or {}
-    clearance = service_default(config.clearance, runtime, "clearance")
-    grip = service_default(config.grip, runtime, "grip")
+    defaults = known_defaults(model.defaults)
+    left = config.left_to_service | {name for name in SERVICE_OPTIONS if getattr(config, name) is None}
+    clearance = defaults.clearance if config.clearance is None else config.clearance
+    grip = defaults.grip if config.grip is None else config.grip
     if config.planner == "vgn":
-        threshold = model.threshold if config.threshold is None else config.threshold
-        turns = service_default(config.turn_average, runtime, "turn_average")
-        checked = clearance or grip
-        floor = runtime.get("fallback_threshold") if config.threshold is None and checked else None
+        threshold = defaults.threshold if config.threshold is None else config.threshold
+        turns = defaults.turn_average if config.turn_average is None else config.turn_average
+        # The service falls back only for requests that name no threshold and run a check.
+        floor = defaults.fallback_threshold if config.threshold is None and (clearance or grip) else None
         return dataclasses.replace(
             config,
             model=model.model_id,
@@ -43,11 +46,28 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
             turn_average=turns,
             clearance=clearance,
             grip=grip,
+            left_to_service=left,
         )
-    threshold = ANTIPODAL_DEFAULT_THRESHOLD if config.threshold is None else config.threshold
-    return dataclasses.replace(
-        config, model="antipodal", threshold=threshold, turn_average=False, clearance=clearance, grip=grip
-    )
+    threshold = defaults.antipodal_threshold if config.threshold is None else config.threshold
+    return dataclasses.replace(config, model="antipodal", threshold=threshold, turn_average=False,
+                               clearance=clearance, grip=grip, left_to_service=left)  # fmt: skip
+
+
+def grasp_defaults(config: ClutterConfig | None, vgn: VGNClient) -> GraspDefaults:
+    """What the service's grasp requests get for the options they leave unset; a ``resolve`` for
+    Ray's ``ClutterPool.prepare`` (``config`` is not used), importable on every worker."""
+    return known_defaults(vgn.model().defaults)
+
+
+def known_defaults(defaults: GraspDefaults | None) -> GraspDefaults:
+    """``defaults`` as ``/model`` reported them; ``ServiceDefaultsError`` when it did not (a
+    service older than this client), since a run could not record what it does."""
+    if defaults is None:
+        raise ServiceDefaultsError(
+            "the service does not report the defaults of grasp requests (GET /model: defaults): "
+            "it is older than this client; upgrade it"
+        )
+    return defaults
 
 
 def run_episode(
@@ -66,18 +86,6 @@ def run_episode(
         return episode.run(progress)
     finally:
         episode.close()
-
-
-def service_default(choice: bool | None, runtime: dict, switch: str) -> bool:
-    """``choice``, or when ``None`` the default the service reports in its ``/model`` runtime;
-    a service from before that default did not apply the option to requests that do not say."""
-    return bool(runtime.get(switch, False)) if choice is None else choice
-
-
-def service_runtime(config: ClutterConfig, vgn: VGNClient) -> dict:
-    """The service's ``/model`` runtime, with its defaults; a ``resolve`` for Ray's
-    ``ClutterPool.prepare`` (``config`` is not used), importable on every worker."""
-    return vgn.model().runtime or {}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -129,16 +137,19 @@ def run(args: argparse.Namespace) -> int:
             )
             return 2
         # The weights are part of the run's identity: a resume with other weights is refused.
-        config = resolve_planner(config, vgn)
         try:
+            config = resolve_planner(config, vgn)
             results = ResultsFolder(results_dir, config.as_json())
-        except ValueError as error:
+        except (ValueError, ServiceDefaultsError) as error:
             print(f"error: {error}", file=sys.stderr)
             return 2
         try:
             summary = _run(config, vgn, results, results_dir / "images" if args.save_images else None)
         except VGNError as error:
             print(f"error: the service answered {error}", file=sys.stderr)
+            return 1
+        except ServiceDefaultsError as error:
+            print(f"error: {error}", file=sys.stderr)
             return 1
     print(
         f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "

@@ -16,7 +16,7 @@ from typing import Literal
 import numpy as np
 
 from client.http import VGNClient
-from client.schemas import Grasp, GraspResult
+from client.schemas import SWITCHES, Grasp, GraspResult
 from sim_worker import images
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views, side_view, six_views
 from sim_worker.closed_loop import (
@@ -50,6 +50,8 @@ Views = Literal["six", "side", "random"]
 Scan = Literal["fixed", "wrist"]
 Selection = Literal["best", "random"]
 Planner = Literal["vgn", "antipodal"]
+#: The grasp options a run may leave to the service (``ClutterConfig.left_to_service``).
+SERVICE_OPTIONS = ("threshold", *SWITCHES)
 
 
 def looking(views: str, scan: str) -> str:
@@ -85,6 +87,10 @@ class ClutterConfig:
     clearance: bool | None = None
     grip: bool | None = None
     turn_average: bool | None = None
+    # The grasp options the run leaves to the service ("threshold" and the switches): requests leave
+    # them unset, while config.json records what the service said it would use (resolve_planner) and
+    # every answer is checked against that record. Not recorded itself.
+    left_to_service: frozenset[str] = frozenset()
     # A depth sensor's errors on every view (``noise`` is "dex"), and per-view camera pose error.
     sensor: Sensor | None = None
     pose_error: bool = False
@@ -117,6 +123,9 @@ class ClutterConfig:
         check_fraction("threshold", self.threshold, optional=True)
         check_fraction("fallback_threshold", self.fallback_threshold, optional=True)
         check_fraction("disturb", self.disturb)
+        unknown = self.left_to_service - set(SERVICE_OPTIONS)
+        if unknown:
+            raise ValueError(f"left_to_service names no grasp option the service decides: {sorted(unknown)}")
         if self.scan == "wrist" and self.views != "six":
             raise ValueError("--scan wrist replaces the fixed views: leave --views at its default")
 
@@ -129,6 +138,7 @@ class ClutterConfig:
         first three first (``resolve_planner``): unresolved, the service's default is recorded as
         off whatever it is."""
         settings = asdict(self)
+        del settings["left_to_service"]
         for switch in ("clearance", "grip", "turn_average", "sensor", "pose_error", "disturb", "closed_loop",
                        "fallback_threshold"):  # fmt: skip
             if not settings[switch]:
@@ -136,6 +146,14 @@ class ClutterConfig:
         if settings["scan"] == "fixed":
             del settings["scan"]
         return settings
+
+    def grasp_options(self) -> dict:
+        """The options of every grasp request: those the run chose, the rest unset for the service to
+        decide (a threshold sent would also switch the service's fallback off)."""
+        left = self.left_to_service
+        return {"planner": self.planner} | {
+            name: None if name in left else getattr(self, name) for name in SERVICE_OPTIONS
+        }
 
     def depth_noise(self) -> DepthNoise | StructuredLightNoise | None:
         """The noise model of every rendered view (``sensor`` wins over ``noise``)."""
@@ -263,20 +281,26 @@ class ClutterRemoval:
         return rng
 
     def look(self, rng: np.random.Generator) -> Observed:
-        """Observe the scene afresh and plan: the fixed views, or a wrist scan that stops early."""
+        """Observe the scene afresh and plan: the fixed views, or a wrist scan that stops early.
+        Its answer must have used the options the run records (:func:`check_answer`)."""
         started = time.perf_counter()
         self.session_id = fresh_session(self.vgn, self.session_id)
         if self.config.scan == "wrist":
             arc = wrist_arc(float(rng.uniform(0.0, 2.0 * np.pi)))
-            scan = wrist_scan(self.vgn, self.session_id, self.camera, arc, self._query(), self._reported_pose)
-            return Observed(scan.answer, scan.frames, scan.integration_ms, elapsed_ms(started), None)
-        if self.config.views == "random":
-            self.views = camera_views("random", rng)
-        integration_ms = self._observe()
-        client_started = time.perf_counter()
-        answer = self.vgn.grasps(self.session_id, **self._query())
-        client_ms = elapsed_ms(client_started)
-        return Observed(answer, len(self.views), integration_ms, elapsed_ms(started), client_ms)
+            scan = wrist_scan(
+                self.vgn, self.session_id, self.camera, arc, self.config.grasp_options(), self._reported_pose
+            )
+            observed = Observed(scan.answer, scan.frames, scan.integration_ms, elapsed_ms(started), None)
+        else:
+            if self.config.views == "random":
+                self.views = camera_views("random", rng)
+            integration_ms = self._observe()
+            client_started = time.perf_counter()
+            answer = self.vgn.grasps(self.session_id, **self.config.grasp_options())
+            client_ms = elapsed_ms(client_started)
+            observed = Observed(answer, len(self.views), integration_ms, elapsed_ms(started), client_ms)
+        check_answer(self.config, observed.answer)
+        return observed
 
     def _attempt(
         self, grasp: Grasp, disturber: Disturber, retry: bool = False
@@ -303,14 +327,6 @@ class ClutterRemoval:
         trial = execute_grasp(self.world, self.gripper, grasp.as_matrix(), allow_contact=True,
                               on_waypoint=on_waypoint, on_contact=watch.look if watch else None)  # fmt: skip
         return trial, (happened[0] if happened else None), watch
-
-    def _query(self) -> dict:
-        """The grasp request's options, as the run's settings give them."""
-        # With a fallback the service's own threshold applies: a named one would switch the fallback off.
-        threshold = None if self.config.fallback_threshold is not None else self.config.threshold
-        return {"threshold": threshold, "planner": self.config.planner,
-                "clearance": self.config.clearance, "grip": self.config.grip,
-                "turn_average": self.config.turn_average}  # fmt: skip
 
     def _reported_pose(self, pose: np.ndarray) -> np.ndarray:
         """Where the service is told the camera was: the true pose, or one with pose error."""
@@ -364,6 +380,33 @@ class Observed:
     integration_ms: float
     first_grasp_ms: float
     client_ms: float | None
+
+
+class ServiceDefaultsError(RuntimeError):
+    """The service does not report the defaults a run must record (it is older than this client),
+    or an answer used other options than the run records (its defaults changed meanwhile)."""
+
+
+def check_answer(config: ClutterConfig, answer: GraspResult) -> None:
+    """Raise ``ServiceDefaultsError`` unless ``answer`` used the threshold (or the recorded fallback)
+    and the switches that ``config`` records, so that config.json stays true to every round. What
+    the answer or the record does not say (an older service, an unresolved config) is not checked."""
+    recorded = {"turn_average": config.turn_average if config.planner == "vgn" else None,
+                "clearance": config.clearance, "grip": config.grip}  # fmt: skip
+    answered = {"turn_average": answer.turn_average, "clearance": answer.clearance, "grip": answer.grip}
+    differ = [
+        f"{name} {answered[name]} (recorded: {recorded[name]})"
+        for name in recorded
+        if recorded[name] is not None and answered[name] is not None and answered[name] != recorded[name]
+    ]
+    thresholds = {config.threshold, config.fallback_threshold} - {None}
+    if config.threshold is not None and answer.threshold not in thresholds:
+        differ.append(f"threshold {answer.threshold} (recorded: {' or '.join(map(str, sorted(thresholds)))})")
+    if differ:
+        raise ServiceDefaultsError(
+            f"the service answered with {', '.join(differ)}: its defaults changed during the run (the "
+            "finished rounds are kept); name the options to hold them fixed"
+        )
 
 
 def _record_empty_look(record: RoundRecord, answer: GraspResult) -> None:

@@ -9,7 +9,7 @@ import argparse
 from benchmarks import clutter
 from client.cli import build_parser
 from client.grpc_api import grasp_planning_pb2 as pb
-from client.schemas import SWITCHES, GraspQuery
+from client.schemas import SWITCHES, GraspDefaults, GraspQuery, GraspResult
 from service.settings import Settings
 
 #: gRPC fields that are not query options: which session the query is about.
@@ -41,3 +41,15 @@ def test_every_switch_has_a_service_default_and_a_flag_wherever_runs_are_made():
     benchmark = clutter.parse_args([])
     assert set(SWITCHES) <= set(vars(benchmark))
     assert set(SWITCHES) <= set(GraspQuery.model_fields)
+
+
+def test_every_switch_is_reported_as_a_default_and_in_every_answer():
+    """``/model`` says what a request that leaves a switch unset gets, and each answer what it got,
+    over HTTP and gRPC alike."""
+    assert (
+        set(SWITCHES)
+        <= set(GraspDefaults.model_fields)
+        == {f.name for f in pb.GraspDefaults.DESCRIPTOR.fields}
+    )
+    assert set(SWITCHES) <= set(GraspResult.model_fields)
+    assert set(GraspResult.model_fields) - {"grasps"} <= {f.name for f in pb.GraspResult.DESCRIPTOR.fields}

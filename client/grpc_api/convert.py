@@ -15,6 +15,7 @@ from client.grpc_api import grasp_planning_pb2 as pb
 from client.schemas import (
     SWITCHES,
     FrameResult,
+    GraspDefaults,
     GraspQuery,
     GraspResult,
     GripperInfo,
@@ -22,6 +23,7 @@ from client.schemas import (
     Intrinsics,
     ModelInfo,
     Pose,
+    RuntimeInfo,
     SessionInfo,
     SessionList,
     Workspace,
@@ -208,11 +210,12 @@ def gripper_list_message(hands: GripperList) -> pb.GripperList:
 
 
 def model_info_message(info: ModelInfo) -> pb.ModelInfo:
-    """The service's ``ModelInfo`` as a reply; the free-form card and runtime travel as JSON text."""
-    data = info.model_dump(exclude={"card", "runtime"}, exclude_none=True)
+    """The service's ``ModelInfo`` as a reply; the free-form card and the runtime travel as JSON text."""
+    data = info.model_dump(exclude={"card", "runtime", "defaults"}, exclude_none=True)
     card_json = None if info.card is None else json.dumps(info.card)
-    runtime_json = None if info.runtime is None else json.dumps(info.runtime)
-    return pb.ModelInfo(card_json=card_json, runtime_json=runtime_json, **data)
+    runtime_json = None if info.runtime is None else info.runtime.model_dump_json()
+    defaults = None if info.defaults is None else pb.GraspDefaults(**info.defaults.model_dump())
+    return pb.ModelInfo(card_json=card_json, runtime_json=runtime_json, defaults=defaults, **data)
 
 
 def array_bytes(array: np.ndarray) -> bytes:
@@ -273,7 +276,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
         threshold=message.threshold,
         clearance_dropped=message.clearance_dropped if message.HasField("clearance_dropped") else None,
         grip_dropped=message.grip_dropped if message.HasField("grip_dropped") else None,
-        turn_average=message.turn_average if message.HasField("turn_average") else None,
+        **optional_fields(message, ("turn_average", "clearance", "grip", "fallback")),
     )
 
 
@@ -307,7 +310,22 @@ def model_info(message: pb.ModelInfo) -> ModelInfo:
         conventions=dict(message.conventions),
         threshold=message.threshold,
         card=json.loads(message.card_json) if message.HasField("card_json") else None,
-        runtime=json.loads(message.runtime_json) if message.HasField("runtime_json") else None,
+        defaults=grasp_defaults(message.defaults) if message.HasField("defaults") else None,
+        runtime=RuntimeInfo.model_validate_json(message.runtime_json)
+        if message.HasField("runtime_json")
+        else None,
+    )
+
+
+def grasp_defaults(message: pb.GraspDefaults) -> GraspDefaults:
+    """A ``GraspDefaults`` message as the client's model."""
+    return GraspDefaults(
+        turn_average=message.turn_average,
+        clearance=message.clearance,
+        grip=message.grip,
+        threshold=message.threshold,
+        antipodal_threshold=message.antipodal_threshold,
+        fallback_threshold=message.fallback_threshold,
     )
 
 

@@ -238,7 +238,7 @@ class Grasp(_message.Message):
     def __init__(self, position: _Optional[_Union[Vector3, _Mapping]] = ..., orientation: _Optional[_Union[Quaternion, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., width: _Optional[float] = ..., quality: _Optional[float] = ..., track_id: _Optional[int] = ...) -> None: ...
 
 class GraspResult(_message.Message):
-    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average", "grip_dropped")
+    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average", "grip_dropped", "clearance", "grip", "fallback")
     GRASPS_FIELD_NUMBER: _ClassVar[int]
     PLANNING_MS_FIELD_NUMBER: _ClassVar[int]
     INTEGRATION_MS_FIELD_NUMBER: _ClassVar[int]
@@ -248,6 +248,9 @@ class GraspResult(_message.Message):
     CLEARANCE_DROPPED_FIELD_NUMBER: _ClassVar[int]
     TURN_AVERAGE_FIELD_NUMBER: _ClassVar[int]
     GRIP_DROPPED_FIELD_NUMBER: _ClassVar[int]
+    CLEARANCE_FIELD_NUMBER: _ClassVar[int]
+    GRIP_FIELD_NUMBER: _ClassVar[int]
+    FALLBACK_FIELD_NUMBER: _ClassVar[int]
     grasps: _containers.RepeatedCompositeFieldContainer[Grasp]
     planning_ms: float
     integration_ms: float
@@ -257,7 +260,10 @@ class GraspResult(_message.Message):
     clearance_dropped: int
     turn_average: bool
     grip_dropped: int
-    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ..., grip_dropped: _Optional[int] = ...) -> None: ...
+    clearance: bool
+    grip: bool
+    fallback: bool
+    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ..., grip_dropped: _Optional[int] = ..., clearance: _Optional[bool] = ..., grip: _Optional[bool] = ..., fallback: _Optional[bool] = ...) -> None: ...
 
 class GetGridRequest(_message.Message):
     __slots__ = ("session_id",)
@@ -320,7 +326,7 @@ class GripperList(_message.Message):
     def __init__(self, grippers: _Optional[_Iterable[_Union[GripperInfo, _Mapping]]] = ..., default: _Optional[str] = ...) -> None: ...
 
 class ModelInfo(_message.Message):
-    __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json")
+    __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json", "defaults")
     class ConventionsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -339,6 +345,7 @@ class ModelInfo(_message.Message):
     THRESHOLD_FIELD_NUMBER: _ClassVar[int]
     CARD_JSON_FIELD_NUMBER: _ClassVar[int]
     RUNTIME_JSON_FIELD_NUMBER: _ClassVar[int]
+    DEFAULTS_FIELD_NUMBER: _ClassVar[int]
     loaded: bool
     model_id: str
     source: str
@@ -350,7 +357,24 @@ class ModelInfo(_message.Message):
     threshold: float
     card_json: str
     runtime_json: str
-    def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ...) -> None: ...
+    defaults: GraspDefaults
+    def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ..., defaults: _Optional[_Union[GraspDefaults, _Mapping]] = ...) -> None: ...
+
+class GraspDefaults(_message.Message):
+    __slots__ = ("turn_average", "clearance", "grip", "threshold", "antipodal_threshold", "fallback_threshold")
+    TURN_AVERAGE_FIELD_NUMBER: _ClassVar[int]
+    CLEARANCE_FIELD_NUMBER: _ClassVar[int]
+    GRIP_FIELD_NUMBER: _ClassVar[int]
+    THRESHOLD_FIELD_NUMBER: _ClassVar[int]
+    ANTIPODAL_THRESHOLD_FIELD_NUMBER: _ClassVar[int]
+    FALLBACK_THRESHOLD_FIELD_NUMBER: _ClassVar[int]
+    turn_average: bool
+    clearance: bool
+    grip: bool
+    threshold: float
+    antipodal_threshold: float
+    fallback_threshold: float
+    def __init__(self, turn_average: _Optional[bool] = ..., clearance: _Optional[bool] = ..., grip: _Optional[bool] = ..., threshold: _Optional[float] = ..., antipodal_threshold: _Optional[float] = ..., fallback_threshold: _Optional[float] = ...) -> None: ...
 
 class TrackRequest(_message.Message):
     __slots__ = ("frame", "query", "plan_every", "match_distance", "match_angle")

@@ -186,7 +186,7 @@ def test_sessions_asking_at_once_over_http_and_grpc_share_forward_passes():
         alone = [vgn.grasps(s, threshold=0.5).grasps for s in sessions]
         assert alone[0], "the box offers grasps"
         for url in (service.url, service.grpc_url):
-            before = vgn.model().runtime["batches"]
+            before = vgn.model().runtime.batches.model_dump()
             start = threading.Barrier(SESSIONS)
 
             def ask(session_id: str, url: str = url, start: threading.Barrier = start):

@@ -113,12 +113,15 @@ def test_a_look_with_nothing_at_the_operating_threshold_falls_back_to_what_the_c
     for pose in circle_views():
         core.add_frame(session, scene.depth(pose), pose)
     operating = core.planner.default_threshold
-    assert core.plan(session, GraspQuery(threshold=operating)).grasps == []  # a named threshold: no fallback
+    named = core.plan(session, GraspQuery(threshold=operating))
+    assert named.grasps == [] and named.fallback is False  # a named threshold: no fallback
     fallback = core.plan(session, GraspQuery())
     assert fallback.grasps and fallback.threshold == 0.0  # the service's floor here
+    assert fallback.fallback is True and fallback.threshold == core.model_info().defaults.fallback_threshold
     assert all(g.quality < operating for g in fallback.grasps)
     plain = core.plan(session, GraspQuery(turn_average=False, clearance=False, grip=False))
     assert plain.threshold == operating  # no check to vouch for a grasp below it: no fallback
+    assert (plain.fallback, plain.clearance, plain.grip) == (False, False, False)
 
 
 def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():

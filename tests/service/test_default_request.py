@@ -17,7 +17,7 @@ from client.grpc_api import grasp_planning_pb2 as pb
 from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
 from client.http import VGNClient
-from client.schemas import GraspResult
+from client.schemas import GraspDefaults, GraspResult
 from service.settings import PACKAGED_MODEL
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
@@ -72,7 +72,8 @@ def bare_grpc_grasps(service: EmbeddedService, session: str) -> pb.GraspResult:
 
 def same_answer(a: GraspResult, b: GraspResult) -> bool:
     """Equal grasps, and the same account of what was done (timings apart)."""
-    keys = ("grasps", "threshold", "model", "turn_average", "clearance_dropped", "grip_dropped")
+    keys = ("grasps", "threshold", "model", "turn_average", "clearance", "grip", "fallback", "clearance_dropped",
+            "grip_dropped")  # fmt: skip
     return all(getattr(a, key) == getattr(b, key) for key in keys)
 
 
@@ -85,6 +86,7 @@ def test_a_request_that_does_not_say_is_turn_averaged_and_clearance_and_grip_che
     for result in (over_http, over_grpc):
         assert result.turn_average is True and result.clearance_dropped is not None
         assert result.grip_dropped is not None
+        assert (result.clearance, result.grip, result.fallback) == (True, True, False), "each answer says"
     assert same_answer(over_http, over_grpc)
     # As asked for explicitly, and the check did drop some of the averaged grasps here.
     for result, explicit in zip(answers(default, session), answers(default, session, **BEST), strict=True):
@@ -106,17 +108,28 @@ def test_both_off_is_the_plain_answer_an_operator_default_off_gives(default, pla
     here, there = fused_session(default), fused_session(plain)
     for asked_off, plain_default in zip(answers(default, here, **PLAIN), answers(plain, there), strict=True):
         assert asked_off.grasps and asked_off.turn_average is False and asked_off.clearance_dropped is None
-        assert asked_off.grip_dropped is None
+        assert asked_off.grip_dropped is None and (asked_off.clearance, asked_off.grip) == (False, False)
         assert same_answer(asked_off, plain_default)
     for best_default, asked_on in zip(answers(default, here), answers(plain, there, **BEST), strict=True):
         assert same_answer(best_default, asked_on)
 
 
 def test_the_model_reports_the_defaults_the_operator_chose(default, plain):
+    """As typed ``defaults``, over HTTP and gRPC alike; for clients that read them under ``runtime``
+    there too, for one release."""
     for service, expected in ((default, True), (plain, False)):
         with VGNClient(service.url) as http, GRPCClient(service.grpc_url) as rpc:
-            for runtime in (http.model().runtime, rpc.model().runtime):
-                assert (runtime["turn_average"], runtime["clearance"], runtime["grip"]) == (expected,) * 3
+            said = [http.model().defaults, rpc.model().defaults]
+            assert said[0] == said[1] == GraspDefaults(
+                turn_average=expected, clearance=expected, grip=expected, threshold=http.model().threshold,
+                antipodal_threshold=0.5, fallback_threshold=0.5,
+            )  # fmt: skip
+        body = httpx.get(f"{service.url}/model").json()
+        assert body["defaults"] == said[0].model_dump()
+        repeated = {
+            key: body["runtime"][key] for key in ("turn_average", "clearance", "grip", "fallback_threshold")
+        }
+        assert repeated == said[0].model_dump(exclude={"threshold", "antipodal_threshold"})
 
 
 def test_the_cli_leaves_the_default_to_the_service_or_turns_either_off(default, capsys):

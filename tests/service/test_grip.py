@@ -233,7 +233,7 @@ def test_a_volume_of_one_frame_is_not_checked(trained):
     first, second = circle_views()[:2]
     trained.add_frame(session, BoxScene().depth(first), first)
     one = trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=True))
-    assert one.grip_dropped is None
+    assert one.grip is True and one.grip_dropped is None, "on for the request, but not run"
     assert one.grasps == trained.plan(session, GraspQuery(threshold=0.0, clearance=False, grip=False)).grasps
     trained.add_frame(session, BoxScene().depth(second), second)
     assert (
@@ -255,13 +255,14 @@ def test_the_option_over_http_and_grpc(trained):
             default, plain, on = (GraspResult.model_validate(a.json()) for a in answers)
             assert plain.grip_dropped is None and on.grip_dropped is not None
             assert (default.grasps, default.grip_dropped) == (on.grasps, on.grip_dropped)
+            assert (default.grip, plain.grip, on.grip) == (True, False, True), "each answer says"
             for grip, expected in ((False, plain), (True, on), (None, on)):
                 over_grpc = rpc.grasps(session, threshold=0.0, grip=grip)
                 assert over_grpc.grasps == expected.grasps
-                assert over_grpc.grip_dropped == expected.grip_dropped
+                assert (over_grpc.grip, over_grpc.grip_dropped) == (expected.grip, expected.grip_dropped)
             bad = http.get(url, params={"grip": "maybe"})
             assert bad.status_code == 422 and "grip" in bad.json()["message"]
-            assert http.get("/model").json()["runtime"]["grip"] is True
+            assert http.get("/model").json()["defaults"]["grip"] is True
     finally:
         server.stop(None)
 

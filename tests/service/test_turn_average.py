@@ -162,7 +162,7 @@ def test_the_operator_chooses_the_default_and_requests_may_override_it(random_ch
         assert default.grasps == plain.grasps != averaged.grasps
         assert (default.turn_average, averaged.turn_average) == (False, True)
         assert core.plan(session, GraspQuery(planner="antipodal")).turn_average is None
-        assert core.model_info().runtime["turn_average"] is False
+        assert core.model_info().defaults.turn_average is False
     finally:
         core.close()
 
@@ -183,7 +183,7 @@ def test_the_option_over_http_grpc_and_the_cli(vgn, core: PlanningService, capsy
     assert (plain.turn_average, averaged.turn_average) == (False, True)
     default = vgn.grasps(session, threshold=0.0, clearance=False, grip=False)
     assert default.grasps == averaged.grasps and default.turn_average is True, "on unless the operator says"
-    assert vgn.model().runtime["turn_average"] is True
+    assert vgn.model().defaults.turn_average is True
     bad = httpx.get(f"{vgn.url}/sessions/{session}/grasps", params={"turn_average": "maybe"})
     assert bad.status_code == 422 and "turn_average" in bad.json()["message"]
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client.schemas import ModelInfo
+from client.schemas import GraspDefaults, GraspResult, ModelInfo
 from sim_worker.camera import WORKSPACE_CENTRE
 from sim_worker.clutter import camera_views
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
@@ -199,42 +199,115 @@ def test_clear_scene_records_the_services_defaults_or_the_choice(
     assert said == (averaged, *checked)
 
 
-class ServiceDefaults:
-    """Stands in for a client of a service whose ``/model`` runtime is ``runtime``."""
+def test_a_run_that_names_no_threshold_leaves_it_and_the_fallback_to_the_service(server, tmp_path: Path):
+    """With the checks on and no threshold named, config.json records the service's operating threshold
+    and its fallback as ``/model`` reports them, and every answer (a fallen-back one too) agrees."""
+    from client.http import VGNClient
 
-    def __init__(self, runtime: dict | None) -> None:
-        self.runtime = runtime
+    results = tmp_path / "run"
+    run = clear_scene("--url", server.url, "--rounds", "1", "--object-count", "2", "--results", str(results))
+    assert run.returncode == 0, run.stderr
+    check_results(results, 1)
+    with VGNClient(server.url) as vgn:
+        defaults = vgn.model().defaults
+    assert defaults is not None and defaults.fallback_threshold < defaults.threshold
+    config = json.loads((results / "config.json").read_text())
+    assert (config["threshold"], config["fallback_threshold"]) == (
+        defaults.threshold,
+        defaults.fallback_threshold,
+    )
+    assert (config["turn_average"], config["clearance"], config["grip"]) == (True, True, True)
+
+
+#: A service whose operator turned every switch off, and one that left them on.
+OFF = GraspDefaults(turn_average=False, clearance=False, grip=False, threshold=0.8, antipodal_threshold=0.4,
+                    fallback_threshold=0.5)  # fmt: skip
+BEST = OFF.model_copy(update={"turn_average": True, "clearance": True, "grip": True})
+
+
+class ServiceDefaults:
+    """Stands in for a client of a service whose ``/model`` reports ``defaults``."""
+
+    def __init__(self, defaults: GraspDefaults | None) -> None:
+        self.defaults = defaults
 
     def model(self) -> ModelInfo:
         return ModelInfo(loaded=True, model_id="m", source=None, architecture="VGN", parameters=1, device="cpu",
-                         conventions={}, threshold=0.8, runtime=self.runtime)  # fmt: skip
+                         conventions={}, threshold=0.8, defaults=self.defaults)  # fmt: skip
 
 
 @pytest.mark.parametrize(
-    ("runtime", "expected"),
-    [({"turn_average": True, "clearance": True, "grip": True}, (True, True, True)),
-     ({"turn_average": False, "clearance": False, "grip": False}, (False, False, False)),
-     ({"turn_average": True, "clearance": True}, (True, True, False)),  # a service from before the grip check
-     ({"turn_average": True}, (True, False, False)),  # a service from before the clearance default
-     (None, (False, False, False))],
-)  # fmt: skip
-def test_the_planner_is_resolved_to_the_services_defaults(
-    runtime: dict | None, expected: tuple[bool, bool, bool]
-):
+    "defaults",
+    [BEST, OFF, BEST.model_copy(update={"grip": False}), OFF.model_copy(update={"turn_average": True})],
+)
+def test_the_planner_is_resolved_to_the_services_defaults(defaults: GraspDefaults):
+    """What the run leaves unset is recorded as the service reports it will be done, and left to the
+    service in every request; a choice is recorded and sent as it is."""
     from sim_worker.clear_scene import resolve_planner
     from sim_worker.clutter import ClutterConfig
 
-    vgn = ServiceDefaults(runtime)
+    vgn = ServiceDefaults(defaults)
+    expected = (defaults.turn_average, defaults.clearance, defaults.grip)
     resolved = resolve_planner(ClutterConfig(), vgn)
     assert (resolved.turn_average, resolved.clearance, resolved.grip) == expected
     assert (resolved.model, resolved.threshold) == ("m", 0.8)
+    checked = defaults.clearance or defaults.grip
+    assert resolved.fallback_threshold == (0.5 if checked else None), "the floor applies only with a check"
+    assert resolved.left_to_service == {"threshold", "turn_average", "clearance", "grip"}
+    sent = resolved.grasp_options()
+    assert sent == {
+        "planner": "vgn",
+        "threshold": None,
+        "turn_average": None,
+        "clearance": None,
+        "grip": None,
+    }
+    recorded = resolved.as_json()
+    assert "left_to_service" not in recorded and recorded["threshold"] == 0.8
+    assert (recorded.get("turn_average", False), recorded.get("clearance", False)) == expected[:2]
     for choice in (True, False):  # a choice is kept whatever the default
         chosen = resolve_planner(ClutterConfig(turn_average=choice, clearance=choice, grip=choice), vgn)
         assert (chosen.turn_average, chosen.clearance, chosen.grip) == (choice, choice, choice)
+        assert chosen.left_to_service == {"threshold"}
+        assert chosen.grasp_options() == {"planner": "vgn", "threshold": None, "turn_average": choice,
+                                          "clearance": choice, "grip": choice}  # fmt: skip
+    named = resolve_planner(ClutterConfig(threshold=0.3), vgn)
+    assert (named.threshold, named.fallback_threshold, named.grasp_options()["threshold"]) == (0.3, None, 0.3)
     baseline = resolve_planner(ClutterConfig(planner="antipodal"), vgn)
     assert (baseline.turn_average, baseline.clearance, baseline.grip) == (False, *expected[1:]), (
         "checks apply too"
     )
+    assert (baseline.model, baseline.threshold, baseline.grasp_options()["threshold"]) == (
+        "antipodal",
+        0.4,
+        None,
+    )
+
+
+def test_a_service_that_does_not_report_its_defaults_is_refused():
+    from sim_worker.clear_scene import resolve_planner
+    from sim_worker.clutter import ClutterConfig, ServiceDefaultsError
+
+    with pytest.raises(ServiceDefaultsError, match="older than this client"):
+        resolve_planner(ClutterConfig(), ServiceDefaults(None))
+
+
+def test_an_answer_that_used_other_options_than_the_record_stops_the_run():
+    """The answers must agree with config.json: the threshold, or the recorded fallback, and the switches."""
+    from sim_worker.clear_scene import resolve_planner
+    from sim_worker.clutter import ClutterConfig, ServiceDefaultsError, check_answer
+
+    config = resolve_planner(ClutterConfig(), ServiceDefaults(BEST))
+    answer = GraspResult(grasps=[], planning_ms=1.0, integration_ms=1.0, frame_count=6, model="m", threshold=0.8,
+                         turn_average=True, clearance=True, grip=True, fallback=False)  # fmt: skip
+    check_answer(config, answer)
+    check_answer(config, answer.model_copy(update={"threshold": 0.5, "fallback": True}))
+    check_answer(config, answer.model_copy(update={"clearance": None, "grip": None}))  # an older service
+    for changed in ({"turn_average": False}, {"grip": False}, {"threshold": 0.7}):
+        with pytest.raises(ServiceDefaultsError, match=next(iter(changed))):
+            check_answer(config, answer.model_copy(update=changed))
+    baseline = resolve_planner(ClutterConfig(planner="antipodal"), ServiceDefaults(BEST))
+    check_answer(baseline, answer.model_copy(update={"threshold": 0.4, "turn_average": None}))
 
 
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
@@ -242,15 +315,10 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
     from benchmarks.clutter import combinations, parse_args, scenario_config, table_row, with_service_defaults
     from sim_worker.clutter import ClutterConfig
 
-    off = {
-        "turn_average": False,
-        "clearance": False,
-        "grip": False,
-    }  # a service whose operator turned all off
     args = with_service_defaults(
         parse_args(["--planners", "vgn", "antipodal", "--selections", "random", "--scenarios", "pile-5",
                     "--turn-average", "--clearance", "--out", str(tmp_path)]),
-        off,
+        OFF,
     )  # fmt: skip
     runs = {planner: folder.name for planner, _, _, folder in combinations(args)}
     assert runs == {
@@ -259,6 +327,7 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
     }
     vgn, antipodal = (scenario_config(args, planner, "random", "pile-5") for planner in ("vgn", "antipodal"))
     assert vgn.turn_average and not antipodal.turn_average
+    assert vgn.left_to_service == {"grip"}, "only the switch left out is left to the service"
     assert "turn_average" not in ClutterConfig().as_json()
     assert table_row("vgn", "random", "pile-5", vgn.as_json(), {})["planner"] == "vgn+turns+clearance"
     assert (
@@ -267,20 +336,18 @@ def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path
     )
     unsaid = parse_args(["--planners", "vgn", "--scenarios", "pile-5", "--selections", "random"])
     assert (unsaid.turn_average, unsaid.clearance) == (None, None), "left to the service"
-    best = {"turn_average": True, "clearance": True, "grip": True}
-    for runtime, folder in (
-        (off, "vgn-random-pile-5"),
-        (best, "vgn-random-pile-5-turns-clearance-grip"),
-        ({}, "vgn-random-pile-5"),
-    ):  # a service that reports no default applies none
-        resolved = with_service_defaults(unsaid, runtime)
-        assert [f.name for *_, f in combinations(resolved)] == [folder], runtime
+    for defaults, folder in ((OFF, "vgn-random-pile-5"), (BEST, "vgn-random-pile-5-turns-clearance-grip")):
+        resolved = with_service_defaults(unsaid, defaults)
+        assert [f.name for *_, f in combinations(resolved)] == [folder], defaults
         config = scenario_config(resolved, "vgn", "random", "pile-5")
         assert (config.turn_average, config.clearance, config.grip) == (
-            runtime.get("turn_average", False), runtime.get("clearance", False), runtime.get("grip", False)
+            defaults.turn_average, defaults.clearance, defaults.grip
         )  # fmt: skip
+        assert config.left_to_service == {"turn_average", "clearance", "grip"}
+        sent = config.grasp_options()
+        assert (sent["turn_average"], sent["clearance"], sent["grip"]) == (None, None, None)
     chosen = with_service_defaults(
-        parse_args(["--no-turn-average", "--clearance"]), best | {"clearance": False}
+        parse_args(["--no-turn-average", "--clearance"]), BEST.model_copy(update={"clearance": False})
     )
     assert (chosen.turn_average, chosen.clearance) == (False, True), "a choice beats the default"
 
