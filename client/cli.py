@@ -394,7 +394,12 @@ def _grasps(vgn: VGNClient, args: argparse.Namespace) -> int:
     if args.json:
         print(result.model_dump_json(indent=2))
         return 0
-    dropped = "" if result.clearance_dropped is None else f", {result.clearance_dropped} dropped by clearance"
+    dropped = (
+        "" if result.workspace_dropped is None else f", {result.workspace_dropped} outside the workspace"
+    )
+    dropped += (
+        "" if result.clearance_dropped is None else f", {result.clearance_dropped} dropped by clearance"
+    )
     dropped += "" if result.grip_dropped is None else f", {result.grip_dropped} dropped by grip"
     print(
         f"{len(result.grasps)} grasps in {result.planning_ms:.1f} ms (model {result.model}, "

@@ -389,11 +389,19 @@ class GraspResult(_Model):
     model: str = Field(description="id of the weights that planned these grasps, or 'antipodal'")
     threshold: float = Field(description="the quality threshold these grasps passed")
     clearance_dropped: int | None = Field(
-        default=None, description="grasps the clearance check dropped; null when it did not run"
+        default=None,
+        description="grasps the clearance check dropped because the open hand's approach hits the observed "
+        "surface; null when it did not run",
     )
     grip_dropped: int | None = Field(
         default=None,
         description="grasps the grip check dropped (after the clearance check); null when it did not run",
+    )
+    workspace_dropped: int | None = Field(
+        default=None,
+        description="grasps dropped because the open fingers reach outside the workspace cube, where the "
+        "volume shows nothing (checked with the clearance check, counted apart from clearance_dropped); "
+        "null when the clearance check did not run, or from a service older than this field",
     )
     turn_average: bool | None = Field(
         default=None, description="vgn: whether the request was turn-averaged; null for antipodal"

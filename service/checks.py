@@ -44,13 +44,16 @@ MAX_RETRIED = 6
 @dataclass(frozen=True)
 class Checked:
     """Grasps after the checks, in their ranked order, with what happened to the others:
-    ``clearance_dropped``/``grip_dropped`` count grasps each check dropped for good (None where it
-    did not run), ``replaced`` those that pass only in an alternative pose."""
+    ``workspace_dropped`` (open fingers outside the workspace cube), ``clearance_dropped`` (the
+    approach hits the observed surface) and ``grip_dropped`` count grasps each stage dropped for good,
+    each grasp in the first stage that drops it (None where the stage did not run: the workspace bound
+    runs with the clearance check), ``replaced`` those that pass only in an alternative pose."""
 
     grasps: list[Grasp]
     clearance_dropped: int | None
     grip_dropped: int | None
     replaced: int
+    workspace_dropped: int | None = None
 
 
 def check_grasps(
@@ -68,11 +71,12 @@ def check_grasps(
     trying :data:`ALTERNATIVES` for the dropped ones when ``alternatives``. The clearance check also
     drops grasps whose open fingers reach outside the workspace cube (``workspace_size``, m)."""
     if not grasps or (surface is None and grid is None):
-        return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0)
+        return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0, _count(surface, 0))
     seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size)
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     orientations = Rotation.from_quat([g.orientation for g in grasps])
-    clear, measure = _judge(positions, orientations, seen)
+    inside, approach_clear, measure = _stages(positions, orientations, seen)
+    clear = inside & approach_clear
     passes = clear & _grip_passes(measure, len(grasps), grip_config)
     chosen: list[Grasp | None] = [g if ok else None for g, ok in zip(grasps, passes, strict=True)]
     square = np.zeros(len(grasps), dtype=bool) if measure is None else measure.square(grip_config)
@@ -104,10 +108,12 @@ def check_grasps(
     kept_mask = np.array([g is not None for g in chosen])
     if grid is not None and (square & kept_mask).any():
         kept_mask &= square  # where some grasps grip squarely, only those
-    by_clearance = int((~clear & ~kept_mask).sum()) if surface is not None else None
-    by_grip = int((clear & ~kept_mask).sum()) if grid is not None else None
+    dropped = ~kept_mask
+    by_workspace = int((~inside & dropped).sum()) if surface is not None else None
+    by_clearance = int((inside & ~approach_clear & dropped).sum()) if surface is not None else None
+    by_grip = int((clear & dropped).sum()) if grid is not None else None
     kept = [g for g, keep in zip(chosen, kept_mask, strict=True) if keep and g is not None]
-    return Checked(kept, by_clearance, by_grip, int((alternative & kept_mask).sum()))
+    return Checked(kept, by_clearance, by_grip, int((alternative & kept_mask).sum()), by_workspace)
 
 
 def passes_checks(
@@ -171,20 +177,37 @@ def _judge(
     positions: np.ndarray, orientations: Rotation, seen: _Observed
 ) -> tuple[np.ndarray, GripMeasure | None]:
     """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
-    clear = np.ones(len(positions), dtype=bool)
+    inside, approach_clear, measure = _stages(positions, orientations, seen)
+    return inside & approach_clear, measure
+
+
+def _stages(
+    positions: np.ndarray, orientations: Rotation, seen: _Observed
+) -> tuple[np.ndarray, np.ndarray, GripMeasure | None]:
+    """Each stage's verdict apart, so an answer can say which dropped a grasp: fingers inside the
+    cube (G,) bool and a clear approach (G,) bool (both all True without a surface), and the grip
+    measure (None without a grid)."""
+    inside = approach_clear = np.ones(len(positions), dtype=bool)
     if seen.surface is not None:
-        clear = _clear(positions, orientations, seen)
+        quaternions = orientations.as_quat()
+        inside = fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
+        approach_clear = _approach_clear(positions, quaternions, seen)
     measure = None if seen.grid is None else _grip_measure(positions, orientations, seen)
-    return clear, measure
+    return inside, approach_clear, measure
 
 
 def _clear(positions: np.ndarray, orientations: Rotation, seen: _Observed) -> np.ndarray:
-    """(G,) bool: the open hand's approach misses the surface and its fingers stay in the cube. The
-    support plane's points may meet the hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the
-    approach: fingertips on the table stop a guarded approach there, around a flat object."""
+    """(G,) bool: the open hand's approach misses the surface and its fingers stay in the cube."""
     quaternions = orientations.as_quat()
-    clear = approach_is_clear(seen.surface, positions, quaternions, point_tolerance=seen.tolerance)
-    return clear & fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
+    inside = fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
+    return inside & _approach_clear(positions, quaternions, seen)
+
+
+def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: _Observed) -> np.ndarray:
+    """(G,) bool: the open hand's approach misses the surface. The support plane's points may meet the
+    hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the approach: fingertips on the table stop a
+    guarded approach there, around a flat object."""
+    return approach_is_clear(seen.surface, positions, quaternions, point_tolerance=seen.tolerance)
 
 
 def contact_tolerances(

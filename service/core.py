@@ -295,6 +295,7 @@ class PlanningService:
             threshold=threshold,
             clearance_dropped=checked.clearance_dropped,
             grip_dropped=checked.grip_dropped,
+            workspace_dropped=checked.workspace_dropped,
             turn_average=turn_average,
             clearance=clearance,
             grip=grip_on,

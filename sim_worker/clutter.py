@@ -413,10 +413,11 @@ def _record_empty_look(record: RoundRecord, answer: GraspResult) -> None:
     """A look offered nothing: note it and what its planner found before the checks dropped it
     (``last_candidates`` zero: the threshold or the valid region left nothing to check)."""
     record.ended = "no_grasp"
-    clearance, grip = answer.clearance_dropped, answer.grip_dropped
-    record.last_candidates = (clearance or 0) + (grip or 0)
+    clearance, grip, workspace = answer.clearance_dropped, answer.grip_dropped, answer.workspace_dropped
+    record.last_candidates = (clearance or 0) + (grip or 0) + (workspace or 0)
     record.last_clearance_dropped = "" if clearance is None else clearance
     record.last_grip_dropped = "" if grip is None else grip
+    record.last_workspace_dropped = "" if workspace is None else workspace
 
 
 def _grasp_row(record: RoundRecord, grasp: Grasp, trial: GraspTrial, observed: Observed) -> dict:

@@ -34,20 +34,29 @@ def outcome_counts(grasps: Iterable[Mapping[str, Any]]) -> dict[str, int]:
 
 def round_endings(rounds: Iterable[Mapping[str, Any]]) -> dict[str, int] | None:
     """Rounds per ending (``ROUND_ENDINGS``) and, for the rounds whose last look offered nothing,
-    the stage that left it empty: ``threshold`` (no candidate reached the checks), ``clearance``
-    (the clearance check dropped every one) or ``grip`` (the grip check dropped the rest).
-    None for results from before endings were recorded."""
+    the last stage of the chain that dropped something: ``threshold`` (no candidate reached the
+    checks), ``workspace`` (every one's open fingers reached outside the cube), ``clearance`` (the
+    approach hit the surface for the rest) or ``grip`` (the grip check dropped the rest). Results
+    from before the workspace was counted apart count it as clearance. None for results from before
+    endings were recorded."""
     rounds = [row for row in rounds if row.get("ended")]
     if not rounds:
         return None
-    counts = {ending: 0 for ending in ROUND_ENDINGS} | {"threshold": 0, "clearance": 0, "grip": 0}
+    stages = ("threshold", "workspace", "clearance", "grip")
+    counts = {ending: 0 for ending in ROUND_ENDINGS} | dict.fromkeys(stages, 0)
     for row in rounds:
         counts[row["ended"]] += 1
         if row["ended"] != "no_grasp":
             continue
         candidates = int(row.get("last_candidates") or 0)
+        by_workspace = int(row.get("last_workspace_dropped") or 0)
         by_clearance = int(row.get("last_clearance_dropped") or 0)
-        counts["threshold" if candidates == 0 else "clearance" if by_clearance == candidates else "grip"] += 1
+        if candidates == 0:
+            counts["threshold"] += 1
+        elif by_workspace == candidates:
+            counts["workspace"] += 1
+        else:
+            counts["clearance" if by_workspace + by_clearance == candidates else "grip"] += 1
     return counts
 
 
@@ -118,12 +127,15 @@ def failure_breakdown(summary: Mapping[str, Any]) -> str:
 
 
 def endings_breakdown(summary: Mapping[str, Any]) -> str:
-    """``cleared 3, two failures 5, no grasp offered 2 (threshold 1, clearance 0, grip 1)``."""
+    """``cleared 3, two failures 5, no grasp offered 2 (threshold 1, workspace 0, clearance 0, grip 1)``."""
     endings = summary.get("endings")
     if not endings:
         return "-"
     text = f"cleared {endings['cleared']}, two failures {endings['failures']}, no grasp offered {endings['no_grasp']}"
-    text += f" (threshold {endings['threshold']}, clearance {endings['clearance']}, grip {endings['grip']})"
+    stages = ", ".join(
+        f"{stage} {endings.get(stage, 0)}" for stage in ("threshold", "workspace", "clearance", "grip")
+    )
+    text += f" ({stages})"
     return text + (f", withdrawn {endings['withdrawn']}" if endings["withdrawn"] else "")
 
 

@@ -37,6 +37,7 @@ ROUND_COLUMNS = [
     "last_candidates",
     "last_clearance_dropped",
     "last_grip_dropped",
+    "last_workspace_dropped",
 ]
 #: Why a round ends: the table is empty; two attempts in a row failed; a look offered no grasp
 #: while objects remained; the closed loop withdrew too often in a row.
@@ -98,6 +99,7 @@ class RoundRecord:
     last_candidates: int | str = ""
     last_clearance_dropped: int | str = ""
     last_grip_dropped: int | str = ""
+    last_workspace_dropped: int | str = ""
     grasps: list[dict[str, Any]] = field(default_factory=list)
 
 

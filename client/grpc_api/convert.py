@@ -274,9 +274,18 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
         frame_count=message.frame_count,
         model=message.model,
         threshold=message.threshold,
-        clearance_dropped=message.clearance_dropped if message.HasField("clearance_dropped") else None,
-        grip_dropped=message.grip_dropped if message.HasField("grip_dropped") else None,
-        **optional_fields(message, ("turn_average", "clearance", "grip", "fallback")),
+        **optional_fields(
+            message,
+            (
+                "clearance_dropped",
+                "grip_dropped",
+                "workspace_dropped",
+                "turn_average",
+                "clearance",
+                "grip",
+                "fallback",
+            ),
+        ),
     )
 
 

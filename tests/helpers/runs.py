@@ -49,11 +49,13 @@ def check_results(results: Path, rounds: int) -> dict:
         assert len(r["left"].split("+")) == int(r["remaining"]) if r["left"] else int(r["remaining"]) == 0
         assert (r["ended"] == "failures") == (labels[-2:] == [0, 0] and int(r["remaining"]) > 0)
         if r["ended"] == "no_grasp":
-            dropped = sum(int(r[key] or 0) for key in ("last_clearance_dropped", "last_grip_dropped"))
+            stages = ("last_workspace_dropped", "last_clearance_dropped", "last_grip_dropped")
+            dropped = sum(int(r[key] or 0) for key in stages)
             assert int(r["last_candidates"]) == dropped
     endings = summary["endings"]
     assert sum(endings[key] for key in ROUND_ENDINGS) == rounds
-    assert endings["threshold"] + endings["clearance"] + endings["grip"] == endings["no_grasp"]
+    stages = ("threshold", "workspace", "clearance", "grip")
+    assert sum(endings[stage] for stage in stages) == endings["no_grasp"]
     for g in grasp_rows:
         assert float(g["planning_time"]) > 0
         if g["client_planning_time"]:  # a wrist scan plans after every frame: no single request

@@ -225,7 +225,9 @@ def test_the_core_checks_every_grasp_before_max_grasps(trained):
     default = trained.plan(session, GraspQuery(threshold=0.0, grip=False))
     assert (default.grasps, default.clearance_dropped) == (checked.grasps, checked.clearance_dropped), "on"
     assert 0 < len(checked.grasps) < len(everything.grasps)
-    assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
+    assert checked.clearance_dropped + checked.workspace_dropped == len(everything.grasps) - len(
+        checked.grasps
+    )
     assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps  # a subset, same order
     with trained.sessions.use(session) as s:
         surface = s.volume.surface_points()
@@ -240,7 +242,9 @@ def test_the_antipodal_planner_takes_the_option_too(trained):
     checked = trained.plan(session, GraspQuery(planner="antipodal", clearance=True, grip=False))
     assert everything.clearance_dropped is None and checked.clearance_dropped is not None
     assert [g for g in everything.grasps if g in checked.grasps] == checked.grasps
-    assert checked.clearance_dropped == len(everything.grasps) - len(checked.grasps)
+    assert checked.clearance_dropped + checked.workspace_dropped == len(everything.grasps) - len(
+        checked.grasps
+    )
 
 
 def test_the_option_over_http_and_grpc(trained):
@@ -267,12 +271,15 @@ def test_the_option_over_http_and_grpc(trained):
             assert plain.clearance_dropped is None
             assert on.grasps and len(on.grasps) < len(plain.grasps)
             assert [g for g in plain.grasps if g in on.grasps] == on.grasps
-            assert on.clearance_dropped == len(plain.grasps) - len(on.grasps)
+            assert on.clearance_dropped + on.workspace_dropped == len(plain.grasps) - len(on.grasps)
             assert (default.grasps, default.clearance_dropped) == (on.grasps, on.clearance_dropped)
             for clearance, expected in ((False, plain), (True, on), (None, on)):
                 over_grpc = rpc.grasps(session, threshold=0.0, clearance=clearance, grip=False)
                 assert over_grpc.grasps == expected.grasps
-                assert over_grpc.clearance_dropped == expected.clearance_dropped
+                assert (over_grpc.clearance_dropped, over_grpc.workspace_dropped) == (
+                    expected.clearance_dropped,
+                    expected.workspace_dropped,
+                )
             bad = http.get(url, params={"clearance": "maybe"})
             assert bad.status_code == 422 and "clearance" in bad.json()["message"]
             # A bool cannot be invalid on the wire; an invalid request with the option set still is.
