@@ -15,7 +15,8 @@ unless its operator turned these off; ``--no-turn-average --no-clearance --no-gr
 plain answer the paper measures. What was used names the folders and labels the rows: a
 scenario's folder ends in -turns, -clearance and -grip for the checks, and in -side or -random
 (``--views``), -dex or -structured-light (``--sensor``), -pose (``--pose-error``), -disturbP,
--closed and -wrist for the other ways of looking.
+-closed and -wrist for the other ways of looking. ``--gripper`` runs another hand (its folders end
+in -NAME, and the service must serve that hand with a network: docs/your-gripper.md).
 """
 
 from __future__ import annotations
@@ -32,8 +33,9 @@ from typing import TYPE_CHECKING
 from benchmarks.chart import write_chart
 from benchmarks.paper import PAPER_GPD, PAPER_TABLE_1, SCENARIOS
 from benchmarks.report import no_grasp_cell, this_machine
-from client.cli import add_check_switches, add_looking_options, add_ray_option
+from client.cli import add_check_switches, add_gripper_option, add_looking_options, add_ray_option
 from client.embedded import EmbeddedService
+from client.gripper_description import DEFAULT_GRIPPER
 from client.http import VGNClient
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspDefaults
 from sim_worker.clear_scene import grasp_defaults, resolve_planner, run_episode
@@ -74,6 +76,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         "--packed-objects", help="held-out objects for packed scenes (default: the pybullet set)"
     )
     add_looking_options(parser)
+    add_gripper_option(parser)
     add_check_switches(parser, "; checked rows are labelled PLANNER+CHECK (vgn+turns for turn averaging)")
     parser.add_argument("--renderer", choices=["auto", "egl", "tiny"], default="auto")
     parser.add_argument(
@@ -122,7 +125,7 @@ def scenario_config(args: argparse.Namespace, planner: str, selection: str, scen
         planner=planner, renderer=args.renderer, noise=args.noise, views=args.views, clearance=args.clearance,
         grip=args.grip, sensor=args.sensor, pose_error=args.pose_error,
         turn_average=args.turn_average if planner == "vgn" else False,
-        disturb=args.disturb, closed_loop=args.closed_loop, scan=args.scan,
+        disturb=args.disturb, closed_loop=args.closed_loop, scan=args.scan, hand=args.gripper,
         left_to_service=getattr(args, "left_to_service", frozenset()),
     )  # fmt: skip
 
@@ -141,6 +144,7 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
                     "-closed" if args.closed_loop else ""
                 )
                 suffix += "-wrist" if args.scan == "wrist" else ""
+                suffix += f"-{args.gripper.name}" if args.gripper.name != DEFAULT_GRIPPER else ""
                 yield planner, selection, scenario, args.out / f"{planner}-{selection}-{scenario}{suffix}"
 
 
@@ -272,7 +276,8 @@ def markdown_table(rows: list[dict], args: argparse.Namespace) -> str:
         f"{looking(args.views, args.scan)}{', depth noise' if args.noise else ''}"
         f"{f', {args.sensor} sensor' if args.sensor else ''}{', camera pose error' if args.pose_error else ''}"
         f"{f', disturbances p={args.disturb:g}' if args.disturb else ''}{', closed loop' if args.closed_loop else ''}"
-        f"{f', {objects}' if objects else ''}",
+        f"{f', {objects}' if objects else ''}"
+        f"{f', gripper {args.gripper.name}' if args.gripper.name != DEFAULT_GRIPPER else ''}",
         "",
         "| planner | selection | threshold | scenario | rounds | success % (95 % CI) | cleared % (95 % CI) "
         "| no grasp offered % of rounds "

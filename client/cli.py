@@ -33,6 +33,13 @@ import httpx
 from client.connect import connect, is_grpc_url
 from client.embedded import bind_error
 from client.extras import missing_extra
+from client.gripper_description import (
+    DEFAULT_GRIPPER,
+    GripperDescription,
+    GripperDescriptionError,
+    builtin_grippers,
+    load_gripper,
+)
 from client.http import DEFAULT_URL, InvalidRequest, VGNClient, VGNError
 from client.log_level import add_log_level_option, configure_logging
 from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspQuery
@@ -83,6 +90,23 @@ def add_looking_options(parser: argparse.ArgumentParser) -> None:
                         help="look with the fixed --views, or with a wrist camera circling the scene (three frames a third "
                         "of a turn apart), planning after every frame and stopping once the best grasp is stable "
                         "(default %(default)s)")  # fmt: skip
+
+
+def gripper_argument(text: str) -> GripperDescription:
+    """``--gripper``'s value: a built-in hand by name, or the description file at a path ending in ``.json``."""
+    try:
+        return load_gripper(text)
+    except GripperDescriptionError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+def add_gripper_option(parser: argparse.ArgumentParser) -> None:
+    """``--gripper NAME|FILE``: the simulated hand and the hand the service's session plans for.
+    clear-scene, generate-data and the benchmark declare it here, once."""
+    parser.add_argument("--gripper", type=gripper_argument, default=DEFAULT_GRIPPER, metavar="NAME|FILE",
+                        help=f"the simulated hand: a built-in one ({', '.join(builtin_grippers())}) or a gripper "
+                        "description file (.json, docs/your-gripper.md); a session that plans grasps for the run "
+                        "names it to the service; default %(default)s")  # fmt: skip
 
 
 def add_query_options(parser: argparse.ArgumentParser, max_grasps: int) -> None:
@@ -204,6 +228,7 @@ def _add_generate_data(commands: argparse._SubParsersAction[argparse.ArgumentPar
         "(objects and settled poses) DIR/recipes/<id>.npz. A rerun resumes.",
     )
     _add_sim_options(gen)
+    add_gripper_option(gen)
     gen.add_argument("--scene", choices=["pile", "packed"], default="pile")
     gen.add_argument(
         "--objects",
@@ -262,6 +287,7 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
         "Without --url an embedded service is started on a free port and stopped at the end.",
     )
     _add_sim_options(clear)
+    add_gripper_option(clear)
     clear.add_argument("--model", help="weights for the embedded service (sets its VGN_MODEL)")
     clear.add_argument("--scene", choices=["blocks", "pile", "packed"], default="blocks",
                        help="what the table holds: blocks, a pile of objects, or objects packed upright")  # fmt: skip

@@ -12,6 +12,7 @@ while the project supports 3.10. Fields and frames: docs/your-gripper.md, docs/c
 from __future__ import annotations
 
 import functools
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -103,6 +104,14 @@ class Force(_Part):
         return self
 
 
+class Mass(_Part):
+    """The simulated links' masses (kg): the ``palm`` (the body the arm carries, the hand's housing
+    included) and each ``finger``; a hand simulated from its boxes needs them."""
+
+    palm: float = Field(gt=0.0)
+    finger: float = Field(gt=0.0)
+
+
 class GraspFrame(_Part):
     """The grasp-frame convention the numbers are given in; only the service's is accepted, so a
     file written for another convention is refused instead of misread."""
@@ -114,7 +123,8 @@ class GraspFrame(_Part):
 
 class GripperDescription(_Part):
     """One parallel-jaw hand. ``version`` labels data made with it (``generation.json: gripper``);
-    ``urdf`` names its simulator model (repository-relative or absolute; none: not simulated)."""
+    ``urdf`` names its simulator model (repository-relative or absolute; none: the simulator builds
+    one from the boxes, which then needs ``mass``)."""
 
     name: str = Field(pattern=NAME_PATTERN)
     version: str = Field(min_length=1)
@@ -129,6 +139,7 @@ class GripperDescription(_Part):
     fingers: tuple[FingerBox, ...] = Field(min_length=1)
     pad: Pad
     force: Force
+    mass: Mass | None = None
 
     @model_validator(mode="after")
     def _consistent(self) -> GripperDescription:
@@ -171,6 +182,14 @@ class GripperDescription(_Part):
     def pad_middle(self) -> float:
         """The middle of the pad along the approach (m, grasp frame z)."""
         return self.pad_box.centre[2]
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 (hex) of what makes the hand: every field but the prose (``description``,
+        ``sources``), so data and results name the exact hand they were made with."""
+        fields = self.model_dump(mode="json", exclude={"description", "sources"})
+        canonical = json.dumps(fields, sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(canonical.encode()).hexdigest()
 
 
 def builtin_grippers() -> tuple[str, ...]:
@@ -232,6 +251,18 @@ def load_gripper(name_or_path: str | Path) -> GripperDescription:
     if isinstance(name_or_path, Path) or text.endswith(".json"):
         return read_gripper(name_or_path)
     return builtin_gripper(text)
+
+
+def check_version(hand: GripperDescription) -> None:
+    """``GripperDescriptionError`` when ``hand`` borrows the ``version`` of a built-in hand it is not:
+    data made with it would carry that hand's label and be mixed with that hand's data."""
+    for name in builtin_grippers():
+        builtin = builtin_gripper(name)
+        if builtin.version == hand.version and builtin.digest != hand.digest:
+            raise GripperDescriptionError(
+                f"the gripper {hand.name!r} is labelled {hand.version!r}, the version of the built-in hand "
+                f"{name!r}, but it is another hand: give it a version of its own"
+            )
 
 
 def default_gripper() -> GripperDescription:

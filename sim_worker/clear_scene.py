@@ -15,9 +15,11 @@ from pathlib import Path
 
 from client.connect import connect
 from client.embedded import EmbeddedService
+from client.gripper_description import GripperDescriptionError, default_gripper
 from client.http import VGNClient, VGNError
 from client.schemas import GraspDefaults
 from sim_worker.clutter import SERVICE_OPTIONS, ClutterConfig, ClutterRemoval, ServiceDefaultsError
+from sim_worker.hand_urdf import hand_urdf
 from sim_worker.metrics import summary_table
 from sim_worker.results import ResultsFolder, RoundRecord
 
@@ -111,7 +113,13 @@ def run(args: argparse.Namespace) -> int:
         disturb=getattr(args, "disturb", 0.0),
         closed_loop=getattr(args, "closed_loop", False),
         scan=getattr(args, "scan", "fixed"),
+        hand=getattr(args, "gripper", None) or default_gripper(),
     )
+    try:
+        hand_urdf(config.hand)  # a hand the simulator cannot build stops the run here
+    except GripperDescriptionError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
     results_dir = Path(args.results or f"results/clear-scene-{args.scene}-seed{args.seed}")
     results_dir.mkdir(parents=True, exist_ok=True)
     if getattr(args, "ray", None) is not None:  # the rounds spread over a Ray cluster instead
@@ -153,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
             return 1
     print(
         f"\nclear-scene --sim: {config.scene}, {config.object_count} objects, "
-        f"{config.looking}, {config.selection} grasp, threshold {config.threshold}, model {config.model}"
+        f"{config.looking}, {config.selection} grasp, threshold {config.threshold}, model {config.model}, "
+        f"gripper {config.hand.name}"
         + (", turn averaging" if config.turn_average else "")
         + (", clearance check" if config.clearance else "")
         + (", grip check" if config.grip else "")

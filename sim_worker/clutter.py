@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
+from client.gripper_description import GripperDescription, default_gripper
 from client.http import VGNClient
 from client.schemas import SWITCHES, Grasp, GraspResult
 from sim_worker import images
@@ -27,7 +28,7 @@ from sim_worker.closed_loop import (
 )
 from sim_worker.disturbance import Disturbance, Disturber
 from sim_worker.grasping import GraspTrial, Outcome, execute_grasp
-from sim_worker.gripper import Gripper
+from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.metrics import summarize
 from sim_worker.objects import object_set
 from sim_worker.results import ResultsFolder, RoundRecord
@@ -100,6 +101,9 @@ class ClutterConfig:
     disturb: float = 0.0
     closed_loop: bool = False
     scan: Scan = "fixed"
+    # The hand that executes the grasps; the service's session plans for the same one (its clearance
+    # and grip checks measure it), so the service must know it and serve it with a network.
+    hand: GripperDescription = field(default_factory=default_gripper)
 
     @property
     def looking(self) -> str:
@@ -133,12 +137,16 @@ class ClutterConfig:
         """The settings as stored in the results folder's config.json, which a resume must match.
 
         ``clearance``, ``grip``, ``turn_average``, ``sensor``, ``pose_error``, ``disturb`` and
-        ``closed_loop`` are recorded when on (``scan`` when not "fixed"); left out when off, so
-        folders of runs from before these options still resume. Resolve the
+        ``closed_loop`` are recorded when on (``scan`` when not "fixed", the hand's name and
+        digest as ``gripper`` and ``gripper_digest`` when it is not ``franka``); left out when off,
+        so folders of runs from before these options still resume. Resolve the
         first three first (``resolve_planner``): unresolved, the service's default is recorded as
         off whatever it is."""
-        settings = asdict(self)
-        del settings["left_to_service"]
+        settings = {
+            f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("left_to_service", "hand")
+        }
+        if self.hand != default_gripper():
+            settings |= {"gripper": self.hand.name, "gripper_digest": self.hand.digest}
         for switch in ("clearance", "grip", "turn_average", "sensor", "pose_error", "disturb", "closed_loop",
                        "fallback_threshold"):  # fmt: skip
             if not settings[switch]:
@@ -187,13 +195,14 @@ class ClutterRemoval:
     ) -> None:
         self.config, self.vgn, self.results = config, vgn, results
         self.world = World(renderer=config.renderer)
-        self.gripper = Gripper(self.world)
+        self.spec = GripperSpec(hand=config.hand)
+        self.gripper = Gripper(self.world, self.spec)
         self.camera = Camera(self.world, noise=config.depth_noise())
         self.pose_error = PoseError() if config.pose_error else None
         self.views = [] if config.views == "random" else camera_views(config.views)
         self.objects = object_set(config.objects or "", config.scene)
         self.image_dir = image_dir
-        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
+        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS, gripper=config.hand.name).session_id
 
     def close(self) -> None:
         """Delete the service session and close the simulator, even when the first fails."""
@@ -276,7 +285,7 @@ class ClutterRemoval:
         rng = np.random.default_rng([self.config.seed, round_id])
         self.camera.rng = rng
         self.world.reset()
-        self.gripper = Gripper(self.world)
+        self.gripper = Gripper(self.world, self.spec)
         generate_scene(self.world, self.config.scene, self.objects, self.config.object_count, rng)
         return rng
 
@@ -284,7 +293,7 @@ class ClutterRemoval:
         """Observe the scene afresh and plan: the fixed views, or a wrist scan that stops early.
         Its answer must have used the options the run records (:func:`check_answer`)."""
         started = time.perf_counter()
-        self.session_id = fresh_session(self.vgn, self.session_id)
+        self.session_id = fresh_session(self.vgn, self.session_id, gripper=self.config.hand.name)
         if self.config.scan == "wrist":
             arc = wrist_arc(float(rng.uniform(0.0, 2.0 * np.pi)))
             scan = wrist_scan(
@@ -366,6 +375,7 @@ class ClutterRemoval:
             rgb,
             self.views[0],
             self.camera.intrinsics,
+            self.spec.finger_depth,
         )
 
 

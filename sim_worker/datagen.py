@@ -14,12 +14,13 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from client.gripper_description import GripperDescription, default_gripper
 from client.http import VGNClient
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views
 from sim_worker.grasping import execute_grasp
@@ -49,8 +50,8 @@ DataScene = Literal["pile", "packed"]
 
 @dataclass(frozen=True)
 class DataGenConfig:
-    """Settings of a generate-data run; all but the renderer are recorded in the dataset's generation.json,
-    which a resumed run must match."""
+    """Settings of a generate-data run; all but the renderer and the hand are recorded in the dataset's
+    generation.json, which a resumed run must match (the hand is recorded by ``generate_data``)."""
 
     scene: DataScene = "pile"
     objects: tuple[str, ...] = ()  # object set names or URDF folders; () = the scene's default
@@ -65,6 +66,7 @@ class DataGenConfig:
     answer_threshold: float = 0.5  # the quality those answers must reach
     answer_model: str | None = None  # weights id of the model expected to answer
     renderer: Renderer = "auto"
+    hand: GripperDescription = field(default_factory=default_gripper)  # the hand that labels
 
     def __post_init__(self) -> None:
         check_choice("scene", self.scene, DataScene)
@@ -80,7 +82,8 @@ class DataGenConfig:
     def recorded(self) -> dict:
         """The settings a resumed run must match (generation.json); the answer-labelling ones only
         when it is on, so folders made before it existed still resume."""
-        settings = {k: v for k, v in dataclasses.asdict(self).items() if k != "renderer"}
+        settings = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                    if f.name not in ("renderer", "hand")}  # fmt: skip
         settings["objects"] = list(settings["objects"])
         if not self.answer_grasps:
             del settings["answer_grasps"], settings["answer_threshold"], settings["answer_model"]
@@ -163,13 +166,14 @@ class SceneBuilder:
         self.world = World(renderer=config.renderer)
         self.camera = Camera(self.world)
         self.objects = merged_object_set(config.objects, config.scene)
-        self.gripper = Gripper(self.world)
+        self.spec = GripperSpec(hand=config.hand)
+        self.gripper = Gripper(self.world, self.spec)
 
     def build(self, index: int) -> BuiltScene | None:
         """Scene ``index`` settled in the world and its views drawn; None when it came out empty."""
         rng = np.random.default_rng([self.config.seed, index])
         self.world.reset()  # the scene depends on (seed, index) alone, not on earlier scenes
-        self.gripper = Gripper(self.world)
+        self.gripper = Gripper(self.world, self.spec)
         generate_scene(self.world, self.config.scene, self.objects, poisson_object_count(rng), rng)
         if not self.world.objects:
             return None
@@ -202,7 +206,10 @@ class SceneLabeller:
         self.builder = SceneBuilder(config)
         self.world = self.builder.world
         self.table = table if table is not None else ObjectTable(object_roots())
-        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS).session_id
+        # Fusing views and reading the cloud need no hand, and no network serves a hand before data
+        # made with it exists: a session names the hand only when its network's answers are labelled.
+        self.hand_name = config.hand.name if config.answer_grasps else None
+        self.session_id = vgn.create_session(intrinsics=SIM_INTRINSICS, gripper=self.hand_name).session_id
         self.trial_seconds = 0.0
         self.trials = 0
 
@@ -245,7 +252,7 @@ class SceneLabeller:
         return views, np.asarray(rows), recipe
 
     def _observe(self, built: BuiltScene) -> SceneViews:
-        self.session_id = fresh_session(self.vgn, self.session_id)
+        self.session_id = fresh_session(self.vgn, self.session_id, gripper=self.hand_name)
         depths = self.builder.render(built)
         for depth, pose in zip(depths, built.camera_poses, strict=True):
             self.vgn.add_frame(self.session_id, depth, pose)
@@ -304,11 +311,11 @@ class SceneLabeller:
         return np.r_[quaternion, position, width, int(best is not None)]
 
 
-def dataset_setup() -> DatasetSetup:
-    """The dataset's setup.json: the simulated workspace, camera and gripper."""
-    spec = GripperSpec()
-    return DatasetSetup(size=WORKSPACE_SIZE, intrinsics=SIM_INTRINSICS, max_opening_width=spec.max_opening,
-                        finger_depth=spec.finger_depth)  # fmt: skip
+def dataset_setup(hand: GripperDescription | None = None) -> DatasetSetup:
+    """The dataset's setup.json: the simulated workspace, camera and gripper (``hand``, default ``franka``)."""
+    hand = hand or default_gripper()
+    return DatasetSetup(size=WORKSPACE_SIZE, intrinsics=SIM_INTRINSICS, max_opening_width=hand.max_opening,
+                        finger_depth=hand.finger_depth)  # fmt: skip
 
 
 def generate(

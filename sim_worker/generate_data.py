@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import json
 import multiprocessing
 import queue
 import sys
@@ -17,8 +18,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from client.embedded import EmbeddedService
+from client.gripper_description import check_version, default_gripper
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
-from sim_worker.gripper import GRIPPER_VERSION
+from sim_worker.hand_urdf import hand_urdf
 from vgn_data.dataset import RawDataset
 from vgn_data.files import check_settings, remove_stale_temporaries
 
@@ -58,13 +60,15 @@ def run(args: argparse.Namespace) -> int:
                                points_per_scene=args.points, noise=args.noise,
                                noise_fraction=args.noise_fraction, side_view_fraction=args.side_view_fraction,
                                answer_grasps=args.answer_grasps, answer_threshold=args.answer_threshold,
-                               renderer=args.renderer)  # fmt: skip
-    except ValueError as error:
+                               renderer=args.renderer, hand=getattr(args, "gripper", None) or default_gripper())  # fmt: skip
+        check_version(config.hand)
+        hand_urdf(config.hand)  # a hand the simulator cannot build stops the run here, not in a worker
+    except ValueError as error:  # a GripperDescriptionError too
         print(f"error: {error}", file=sys.stderr)
         return 2
     out = Path(args.out)
     try:
-        dataset = RawDataset(out, dataset_setup())
+        dataset = RawDataset(out, dataset_setup(config.hand))
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
@@ -117,11 +121,20 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_settings(out: Path, config: DataGenConfig) -> int:
     """Record the run's settings, or refuse to resume a folder made with others; the exit status."""
-    settings = config.recorded()
     # Labels are what this hand can do: a folder made with another hand is never resumed into.
-    settings["gripper"] = GRIPPER_VERSION
+    # ``gripper`` is the hand's version, the label training and the shards read.
+    hand = config.hand
+    settings = config.recorded() | {
+        "gripper": hand.version,
+        "gripper_name": hand.name,
+        "gripper_digest": hand.digest,
+    }
+    path = out / "generation.json"
+    # A folder made before the hand's name and digest were recorded resumes when its version matches.
+    previous = json.loads(path.read_text()) if path.is_file() else {}
+    added = tuple(key for key in ("gripper_name", "gripper_digest") if previous and key not in previous)
     try:
-        check_settings(out / "generation.json", settings)
+        check_settings(path, settings, may_change=added)
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

@@ -1,27 +1,27 @@
 """A free-floating parallel-jaw gripper whose base frame is the grasp frame (docs/conventions.md).
 
-The hand's geometry is the ``franka`` gripper description (client/grippers/franka.json): its
-URDF, opening, finger depth, closing force and pre-grasp distance are read from there."""
+The hand is a gripper description (client/grippers/, or a user's file; default ``franka``): its
+URDF (the one it names, else one built from its boxes: sim_worker/hand_urdf.py), opening, finger
+depth, closing force and pre-grasp distance all come from there."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pybullet
 
 from client.geometry import pose_from_matrix
 from client.gripper_description import GripperDescription, default_gripper
+from sim_worker.hand_urdf import hand_urdf
 from sim_worker.world import World
 
-#: The simulated hand's description (the default one: ``franka``).
+#: The default simulated hand: ``franka``, the hand of every dataset and result so far.
 HAND: GripperDescription = default_gripper()
-#: Its URDF; a description names it relative to the folder that holds the packages.
-GRIPPER_URDF = Path(__file__).resolve().parents[1] / str(HAND.urdf)
-#: Which hand made a label. Datasets record it, and data of different versions is never mixed:
-#: a label says what *this* hand can do. ``box-v1`` was the earlier 12 mm box-finger hand.
+#: Which hand made a label (the default hand's; a run records its own hand's ``version``). Datasets
+#: record it, and data of different versions is never mixed: a label says what *this* hand can do.
+#: ``box-v1`` was the earlier 12 mm box-finger hand.
 GRIPPER_VERSION = HAND.version
 #: How far (in 2 mm waypoints) a contact-stopped approach may back off to stop pressing.
 MAX_BACK_OFF_STEPS = 3
@@ -31,13 +31,12 @@ PARKED_POSITION = (0.15, 0.15, 10.0)
 
 @dataclass(frozen=True)
 class GripperSpec:
-    """The simulated hand's parameters: geometry and closing force from its description (:data:`HAND`),
-    friction and motion as in VGN's simulation."""
+    """The simulated hand's parameters: geometry and closing force from its description ``hand``
+    (``finger_force`` left unset: the description's closing force), friction and motion as in
+    VGN's simulation, the same for every hand."""
 
-    max_opening: float = HAND.max_opening
-    finger_depth: float = HAND.finger_depth
-    finger_force: float = HAND.force.closing  # N per finger while closing
-    pregrasp_distance: float = HAND.pregrasp_distance  # m back along the approach the open hand starts
+    hand: GripperDescription = HAND
+    finger_force: float | None = None  # N per finger while closing
     finger_friction: float = 1.0
     #: Rubber pads: a compliant contact (N/m, N·s/m) instead of a rigid one, so a pad yields a
     #: few millimetres under the closing force and grips with an area rather than a point.
@@ -51,6 +50,25 @@ class GripperSpec:
     step_length: float = 0.002  # m per motion step
     speed: float = 0.10  # m/s of motion
 
+    def __post_init__(self) -> None:
+        if self.finger_force is None:
+            object.__setattr__(self, "finger_force", self.hand.force.closing)
+
+    @property
+    def max_opening(self) -> float:
+        """The fully open width (m): the hand approaches with it."""
+        return self.hand.max_opening
+
+    @property
+    def finger_depth(self) -> float:
+        """From the grasp frame's origin to the fingertips along the approach (m)."""
+        return self.hand.finger_depth
+
+    @property
+    def pregrasp_distance(self) -> float:
+        """How far (m) back along the approach the open hand starts."""
+        return self.hand.pregrasp_distance
+
 
 class Gripper:
     """The hand is a dynamic body carried by a fixed constraint (so it pushes and is pushed
@@ -59,7 +77,7 @@ class Gripper:
     def __init__(self, world: World, spec: GripperSpec = GripperSpec()) -> None:
         self.world, self.spec = world, spec
         p = world.p
-        self.body = p.loadURDF(str(GRIPPER_URDF), PARKED_POSITION, (0, 0, 0, 1))
+        self.body = p.loadURDF(str(hand_urdf(spec.hand)), PARKED_POSITION, (0, 0, 0, 1))
         self.interrupted = False  # the last move_to was stopped by its on_waypoint
         names = {p.getJointInfo(self.body, j)[1].decode(): j for j in range(p.getNumJoints(self.body))}
         self.fingers = (names["left_finger_joint"], names["right_finger_joint"])
@@ -87,7 +105,12 @@ class Gripper:
     def use_spec(self, spec: GripperSpec) -> None:
         """Give the hand ``spec``'s pad contact and, from the next reset or close, its finger force:
         a benchmark compares hands on one saved state. Call it after ``World.restore_state``, which
-        does not restore contact parameters. Motion settings stay those the hand was made with."""
+        does not restore contact parameters. Motion settings stay those the hand was made with, and
+        the hand itself: another description needs a new ``Gripper``."""
+        if spec.hand != self.spec.hand:
+            raise ValueError(
+                f"this gripper is the {self.spec.hand.name!r} hand: make a new one for {spec.hand.name!r}"
+            )
         self.spec = spec
         for finger in self.fingers:
             self.world.p.changeDynamics(

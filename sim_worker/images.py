@@ -54,13 +54,18 @@ def _strokes(pixels: np.ndarray) -> list[list[tuple[float, float]]]:
 
 
 def draw_grasp(
-    rgb: np.ndarray, grasp: Grasp, camera_pose: np.ndarray, intrinsics: Intrinsics, caption: str
+    rgb: np.ndarray,
+    grasp: Grasp,
+    camera_pose: np.ndarray,
+    intrinsics: Intrinsics,
+    caption: str,
+    finger_depth: float | None = None,
 ) -> Image.Image:
     """The camera image with the gripper outline at ``grasp`` (dark halo, so it reads on any
-    background) and a caption bar."""
+    background; fingers ``finger_depth`` long, default the default hand's) and a caption bar."""
     image = Image.fromarray(rgb).convert("RGB")
     draw = ImageDraw.Draw(image)
-    pixels = project(gripper_outline(grasp.as_matrix(), grasp.width), camera_pose, intrinsics)
+    pixels = project(gripper_outline(grasp.as_matrix(), grasp.width, finger_depth), camera_pose, intrinsics)
     for colour, width in (((0, 0, 0), 6), (GRASP_COLOUR, 3)):
         for stroke in _strokes(pixels):
             draw.line(stroke, fill=colour, width=width, joint="curve")
@@ -78,12 +83,14 @@ def save_attempt_image(
     rgb: np.ndarray,
     camera_pose: np.ndarray,
     intrinsics: Intrinsics,
+    finger_depth: float | None = None,
 ) -> Path:
-    """Write one attempt's picture (the planned grasp drawn into the camera image)."""
+    """Write one attempt's picture (the planned grasp drawn into the camera image, with fingers
+    ``finger_depth`` long)."""
     image_dir.mkdir(parents=True, exist_ok=True)
     caption = f"round {round_id}  attempt {attempt + 1}  quality {grasp.quality:.3f}  width {1000 * grasp.width:.1f} mm"
     path = image_dir / attempt_image_name(round_id, attempt)
-    draw_grasp(rgb, grasp, camera_pose, intrinsics, caption).save(path)
+    draw_grasp(rgb, grasp, camera_pose, intrinsics, caption, finger_depth).save(path)
     return path
 
 
