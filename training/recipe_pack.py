@@ -17,6 +17,10 @@ from training.recipe_shards import DEFAULT_SCENES_PER_SHARD, RecipeFolder, Recip
 from training.shards import ShardError, ShardFolder, quantize
 from vgn_data.dataset import RawDataset
 
+#: Generation settings recorded since some sources were packed: a folder that records them still
+#: packs into such a source when every other setting matches (the hand's name and description digest).
+RECORDED_LATER = ("gripper_name", "gripper_digest")
+
 
 def portable_generation(generation: dict[str, Any], object_refs: Iterable[str]) -> dict[str, Any]:
     """A source's generator settings with its object folders named by the object references its
@@ -77,7 +81,10 @@ def pack_raw(
         return []
     settings = portable_generation(generation, (str(r) for rec in records for r in rec.arrays["objects"]))
     known = manifest["sources"].get(source)
-    if known is not None and {**known, "objects": None} != {**settings, "objects": None}:
+    # A source packed before a setting was recorded grows with scenes whose folder records it.
+    later = {key for key in RECORDED_LATER if known is not None and key not in known}
+    comparable = {key: value for key, value in settings.items() if key not in later}
+    if known is not None and {**known, "objects": None} != {**comparable, "objects": None}:
         raise ShardError(
             f"source {source!r} in {out} was generated with other settings; use another source name"
         )

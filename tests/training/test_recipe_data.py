@@ -98,6 +98,33 @@ def test_new_scenes_go_into_a_new_shard_and_old_ones_stay(server, raw: Path, tmp
     assert sha256_of(data / first["file"]) == first["sha256"]
 
 
+def test_a_source_packed_before_the_hand_was_named_grows_with_folders_that_name_it(raw: Path, tmp_path: Path):
+    """Sources packed when generation recorded only the hand's version keep growing once it also
+    records the hand's name and digest; a folder whose other settings differ is still refused."""
+    older = tmp_path / "older"
+    shutil.copytree(raw, older)
+    generation = json.loads((older / "generation.json").read_text())
+    assert {"gripper_name", "gripper_digest"} <= set(generation)
+    for key in ("gripper_name", "gripper_digest"):
+        del generation[key]
+    (older / "generation.json").write_text(json.dumps(generation))
+    for recipe in sorted(RawDataset(older).recipes_dir.glob("*.npz"))[1:]:  # the first scene only
+        recipe.unlink()
+    data = tmp_path / "data"
+    assert vgn_data("pack", str(older), "--source", "pile", "--out", str(data)).returncode == 0
+    assert "gripper_name" not in RecipeFolder(data).manifest()["sources"]["pile"]
+    other = tmp_path / "other"
+    shutil.copytree(raw, other)
+    settings = json.loads((raw / "generation.json").read_text())
+    (other / "generation.json").write_text(json.dumps(settings | {"yaws": settings["yaws"] + 1}))
+    refused = vgn_data("pack", str(other), "--source", "pile", "--out", str(data))
+    assert refused.returncode != 0 and "other settings" in refused.stderr
+    grown = vgn_data("pack", str(raw), "--source", "pile", "--out", str(data))
+    assert grown.returncode == 0, grown.stderr
+    manifest = RecipeFolder(data).manifest()
+    assert len(manifest["shards"]) == 2 and manifest["sources"]["pile"]["gripper_name"] == "franka"
+
+
 def test_a_recipe_that_no_longer_matches_its_labels_fails_verification(raw: Path, tmp_path: Path):
     data = tmp_path / "data"
     assert vgn_data("pack", str(raw), "--source", "pile", "--out", str(data)).returncode == 0
