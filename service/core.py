@@ -285,6 +285,16 @@ class PlanningService:
             checked = check_grasps(grasps, surface, grid, voxel_size, workspace_pose, workspace_size,
                                    self.grip_config, self.settings.alternatives)  # fmt: skip
             threshold = floor
+            if not checked.grasps and self.settings.surface_fallback:
+                # Still nothing: the pairs the observed surface offers, under the same checks.
+                with self.sessions.use(session_id) as session:
+                    cloud = session.volume.cloud()
+                config = antipodal_config(ranked.model_copy(update={"threshold": floor}))
+                pairs = plan_antipodal(cloud, workspace_pose, config, session_hand)
+                surface_checked = check_grasps(pairs, surface, grid, voxel_size, workspace_pose, workspace_size,
+                                               self.grip_config, self.settings.alternatives)  # fmt: skip
+                if surface_checked.grasps:
+                    checked, model = surface_checked, "antipodal"
         grasps = checked.grasps[: query.max_grasps]
         return GraspResult(
             grasps=grasps,

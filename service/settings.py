@@ -101,6 +101,13 @@ class Settings(BaseSettings):
         "(the answer's threshold says which applied), so that a robot is not left with nothing to do while "
         "objects remain; 1 answers with none",
     )
+    surface_fallback: bool = Field(
+        default=True,
+        description="when even the fallback threshold leaves a VGN request that names no threshold with no "
+        "grasp that passes the checks, answer with the antipodal pairs of the observed surface that pass "
+        "them (the answer's model says 'antipodal'): the network's few confident locations on a shape it "
+        "does not know can all fail a check while the surface still offers a grip",
+    )
     grip_preferred_alignment: float = Field(
         default=GripConfig().preferred_alignment,
         ge=-1.0,

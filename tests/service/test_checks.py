@@ -124,6 +124,38 @@ def test_a_look_with_nothing_at_the_operating_threshold_falls_back_to_what_the_c
     assert (plain.fallback, plain.clearance, plain.grip) == (False, False, False)
 
 
+@pytest.mark.parametrize("surface_fallback", [True, False])
+def test_when_the_fallback_offers_nothing_the_surfaces_antipodal_pairs_are_checked_and_offered(
+    surface_fallback,
+):
+    """A low slab (10 x 6 x 2.5 cm) with the fallback's floor just under the operating threshold: the
+    packaged model offers nothing there, while the slab's sides make antipodal pairs that pass the checks."""
+    settings = Settings(
+        model=PACKAGED_MODEL, api_key=None, fallback_threshold=0.79, surface_fallback=surface_fallback
+    )
+    service = PlanningService.from_settings(settings)
+    try:
+        scene = BoxScene(lower=(0.12, 0.12, TABLE_Z), upper=(0.22, 0.18, TABLE_Z + 0.025))
+        session = service.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+        for pose in circle_views():
+            service.add_frame(session, scene.depth(pose), pose)
+        answer = service.plan(session, GraspQuery())
+        assert answer.fallback is True and answer.threshold == 0.79
+        if not surface_fallback:
+            assert answer.grasps == [] and answer.model == service.planner.model_id
+            return
+        assert answer.grasps and answer.model == "antipodal"
+        with service.sessions.use(session) as state:
+            surface = state.volume.surface_points()
+        again = check_grasps(answer.grasps, surface, service.grid(session), VOXEL, np.eye(4), SIZE,
+                             service.grip_config, alternatives=False)  # fmt: skip
+        assert again.grasps == answer.grasps  # each passes the checks as it is offered
+        named = service.plan(session, GraspQuery(threshold=0.8))
+        assert named.grasps == [] and named.model == service.planner.model_id  # a named threshold: neither
+    finally:
+        service.close()
+
+
 def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():
     """Beyond the cube the volume shows nothing: on an empty table top, a grasp at the cube's edge
     would otherwise pass with its fingers in the table outside it."""
