@@ -24,7 +24,7 @@ from client.http import (
     VGNError,
 )
 from client.robot import nearest_turn, pregrasp_pose, retreat_pose, tool_offset, tool_pose
-from client.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
+from vgn_contract.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
 
 if TYPE_CHECKING:
     from client.grpc_client import GRPCClient as GRPCClient

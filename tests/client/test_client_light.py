@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client.schemas import Intrinsics
+from vgn_contract.schemas import Intrinsics
 from vgn_data.dataset import DatasetSetup, RawDataset, SceneViews
 
 REPO = Path(__file__).resolve().parents[2]
@@ -100,7 +100,7 @@ def test_every_client_module_imports_without_heavy_packages(tmp_path, grpc_block
     if grpc_blocked:
         # Only the gRPC transport may be missing, and only for want of grpcio/protobuf.
         for name, error in report["failed"].items():
-            assert name == "client.grpc_client" or name.startswith("client.grpc_api."), (name, error)
+            assert name == "client.grpc_client" or name.startswith("vgn_contract.grpc_api."), (name, error)
             assert "grpc" in error or "google" in error, (name, error)
         assert "client.grpc_client" in report["failed"]
         assert all(attempt.startswith(("grpc", "google")) for attempt in report["attempts"]), report

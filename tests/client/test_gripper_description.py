@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from client.gripper_description import (
+from vgn_contract.gripper_description import (
     GripperDescriptionError,
     builtin_gripper,
     builtin_grippers,

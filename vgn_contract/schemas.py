@@ -15,13 +15,13 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, FiniteFloat, field_validator, model_validator
 
-from client.geometry import (
+from vgn_contract.geometry import (
     UNIT_QUATERNION_TOLERANCE,
     check_rigid_matrix,
     check_unit_quaternion,
     pose_from_matrix,
 )
-from client.gripper_description import DEFAULT_GRIPPER, NAME_PATTERN
+from vgn_contract.gripper_description import DEFAULT_GRIPPER, NAME_PATTERN
 
 Vector3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 Quaternion = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
@@ -88,7 +88,7 @@ class Pose(_Model):
 
     def as_matrix(self) -> np.ndarray:
         """The 4×4 homogeneous matrix child→parent."""
-        from client.geometry import matrix_from_pose
+        from vgn_contract.geometry import matrix_from_pose
 
         return matrix_from_pose(np.asarray(self.position), np.asarray(self.orientation))
 
@@ -373,7 +373,7 @@ class Grasp(_Model):
 
     def as_matrix(self) -> np.ndarray:
         """The 4×4 grasp frame → world matrix."""
-        from client.geometry import matrix_from_pose
+        from vgn_contract.geometry import matrix_from_pose
 
         return matrix_from_pose(np.asarray(self.position), np.asarray(self.orientation))
 

@@ -11,7 +11,7 @@ import inspect
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.gripper_description import default_gripper
+from vgn_contract.gripper_description import default_gripper
 
 #: How far a quaternion's norm may stray from 1 before it is refused rather than trusted.
 UNIT_QUATERNION_TOLERANCE = 1e-3

@@ -1,9 +1,9 @@
 """A fleet on one machine: N service processes behind HAProxy, started, watched and stopped
 together (``vgn-client serve --replicas N``).
 
-Each replica is a uvicorn child (``client.embedded``) on loopback ports of its own, HTTP and
-gRPC; HAProxy (``client.haproxy``) listens on the fleet's ports and routes each session to one
-replica. Every child ends with this process, however it ends (``client.lifetime``): HAProxy is
+Each replica is a uvicorn child (``service.launch.embedded``) on loopback ports of its own, HTTP and
+gRPC; HAProxy (``service.launch.haproxy``) listens on the fleet's ports and routes each session to one
+replica. Every child ends with this process, however it ends (``service.launch.lifetime``): HAProxy is
 started through a Python shim that asks for that and then becomes HAProxy. A replica that
 dies is started again on its ports (unless ``restart`` is off); its sessions move to the other
 replicas meanwhile and back once it is up, rebuilt each time by their clients.
@@ -24,13 +24,13 @@ from pathlib import Path
 
 import httpx
 
-from client.embedded import EmbeddedService, bind_error, free_port
-from client.haproxy import ProxyConfig, Replica, render
-from client.lifetime import ending_with_this_process
+from service.launch.embedded import EmbeddedService, bind_error, free_port
+from service.launch.haproxy import ProxyConfig, Replica, render
+from service.launch.lifetime import ending_with_this_process
 
 #: Runs a program so that it ends with this process: asks the kernel first, then becomes it.
 EXEC_ENDING_WITH_PARENT = (
-    "import os, sys; from client.lifetime import end_with_parent_if_asked; "
+    "import os, sys; from service.launch.lifetime import end_with_parent_if_asked; "
     "end_with_parent_if_asked(); os.execvp(sys.argv[1], sys.argv[1:])"
 )
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp
+from vgn_contract.schemas import Grasp
 
 #: Defaults: two voxels of the default 7.5 mm workspace grid, and a few degrees.
 DEFAULT_MAX_DISTANCE = 0.015

@@ -3,7 +3,7 @@
 Every number the service, the simulator and the data tools use about a hand (opening, finger
 depth, the collision boxes of the palm and the fingers, the pads, the closing force, the
 pre-grasp distance) comes from a description, so a hand is written down once. The built-in
-hands ship in ``client/grippers/`` (``franka``: the simulated hand every dataset and the
+hands ship in ``vgn_contract/grippers/`` (``franka``: the simulated hand every dataset and the
 packaged network were made with); any other file is read by its path. The format is JSON, not
 YAML or TOML: pyyaml is no dependency of the light client, and ``tomllib`` needs Python 3.11
 while the project supports 3.10. Fields and frames: docs/your-gripper.md, docs/conventions.md.
@@ -193,7 +193,7 @@ class GripperDescription(_Part):
 
 
 def builtin_grippers() -> tuple[str, ...]:
-    """The names of the hands shipped in ``client/grippers/``, sorted."""
+    """The names of the hands shipped in ``vgn_contract/grippers/``, sorted."""
     return tuple(sorted(path.stem for path in BUILTIN_DIR.glob("*.json")))
 
 

@@ -1,4 +1,4 @@
-"""Conversions between the protobuf messages and the wire schemas of ``client.schemas``.
+"""Conversions between the protobuf messages and the wire schemas of ``vgn_contract.schemas``.
 
 Incoming messages become plain dicts that are validated by the same pydantic models as the
 HTTP API, so both front ends accept and reject exactly the same input with the same messages.
@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.schemas import (
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.schemas import (
     SWITCHES,
     FrameResult,
     GraspDefaults,

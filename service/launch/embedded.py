@@ -17,7 +17,7 @@ from pathlib import Path
 
 import httpx
 
-from client.lifetime import ending_with_this_process
+from service.launch.lifetime import ending_with_this_process
 
 
 def free_port(host: str = "127.0.0.1") -> int:
