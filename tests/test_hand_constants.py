@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ("client", "service", "sim_worker", "training", "vgn_data")
+SHIPPED = ("vgn_contract", "client", "service", "sim_worker", "training", "vgn_data")
 #: The module that reads descriptions: the one place their fields are named and checked.
 READER = "vgn_contract/gripper_description.py"
 #: Names that are a hand's constant whatever their value.

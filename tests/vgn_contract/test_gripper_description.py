@@ -18,7 +18,7 @@ from vgn_contract.gripper_description import (
     read_gripper,
 )
 
-FRANKA_FILE = Path(__file__).resolve().parents[2] / "client" / "grippers" / "franka.json"
+FRANKA_FILE = Path(__file__).resolve().parents[2] / "vgn_contract" / "grippers" / "franka.json"
 
 
 def franka_data() -> dict:

@@ -1,0 +1,27 @@
+"""Moved to ``vgn_contract.geometry`` (the wire contract); this path re-exports it for one release."""
+
+from vgn_contract.geometry import (
+    ORTHONORMAL_TOLERANCE,
+    STEM_LENGTH,
+    UNIT_QUATERNION_TOLERANCE,
+    check_rigid_matrix,
+    check_unit_quaternion,
+    gripper_outline,
+    invert,
+    look_at,
+    matrix_from_pose,
+    pose_from_matrix,
+)
+
+__all__ = [
+    "ORTHONORMAL_TOLERANCE",
+    "STEM_LENGTH",
+    "UNIT_QUATERNION_TOLERANCE",
+    "check_rigid_matrix",
+    "check_unit_quaternion",
+    "gripper_outline",
+    "invert",
+    "look_at",
+    "matrix_from_pose",
+    "pose_from_matrix",
+]

@@ -1,0 +1,29 @@
+"""Moved to ``service.launch.haproxy``, beside the server it starts; this path forwards there for one release."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from service.launch.haproxy import ProxyConfig, Replica, main, numbered, render
+
+__all__ = [
+    "ProxyConfig",
+    "Replica",
+    "main",
+    "numbered",
+    "render",
+]
+
+
+def __getattr__(name: str) -> Any:
+    """Each name on first use, so that importing ``client`` loads none of the server's package."""
+    if name not in __all__:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module("service.launch.haproxy"), name)
+
+
+if __name__ == "__main__":
+    sys.exit(importlib.import_module("service.launch.haproxy").main())

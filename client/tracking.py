@@ -1,0 +1,15 @@
+"""Moved to ``vgn_contract.tracking`` (the wire contract); this path re-exports it for one release."""
+
+from vgn_contract.tracking import (
+    DEFAULT_MAX_ANGLE_DEG,
+    DEFAULT_MAX_DISTANCE,
+    GraspTracker,
+    grasp_angle,
+)
+
+__all__ = [
+    "DEFAULT_MAX_ANGLE_DEG",
+    "DEFAULT_MAX_DISTANCE",
+    "GraspTracker",
+    "grasp_angle",
+]
