@@ -1,4 +1,4 @@
-"""Moved to ``vgn_contract.gripper_description`` (the wire contract); this path re-exports it for one release."""
+"""Moved to ``vgn_contract.gripper_description`` (the wire contract); re-exported here for one release."""
 
 from vgn_contract.gripper_description import (
     BUILTIN_DIR,

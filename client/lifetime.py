@@ -1,4 +1,4 @@
-"""Moved to ``service.launch.lifetime``, beside the server it starts; this path forwards there for one release."""
+"""Moved to ``service.launch.lifetime``, beside the server it starts; forwarded from here for one release."""
 
 from __future__ import annotations
 

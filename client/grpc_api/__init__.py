@@ -1,1 +1,1 @@
-"""Moved to ``vgn_contract.grpc_api`` (the wire contract); its modules here re-export theirs for one release."""
+"""Moved to ``vgn_contract.grpc_api``; its modules are re-exported here for one release."""

@@ -1,4 +1,4 @@
-"""Moved to ``vgn_contract.grpc_api.convert`` (the wire contract); this path re-exports it for one release."""
+"""Moved to ``vgn_contract.grpc_api.convert`` (the wire contract); re-exported here for one release."""
 
 from vgn_contract.grpc_api.convert import (
     ENCODING_OF_MEDIA_TYPE,

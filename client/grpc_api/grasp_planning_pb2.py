@@ -1,4 +1,4 @@
-"""Moved to ``vgn_contract.grpc_api.grasp_planning_pb2`` (the wire contract); this path re-exports it for one release."""
+"""Moved to ``vgn_contract.grpc_api.grasp_planning_pb2``; re-exported here for one release."""
 
 from vgn_contract.grpc_api.grasp_planning_pb2 import (
     DEPTH_ENCODING_PNG16,

@@ -1,8 +1,8 @@
 """Start the service in its own process on a free loopback port, for when no URL is given.
 
-The client package does not import the service: it runs ``python -m uvicorn service.app:app``
-in a child process, so it needs the ``service`` extra installed but keeps this process free
-of torch and open3d.
+It imports none of the server: it runs ``python -m uvicorn service.app:app`` in a child
+process, which needs the ``service`` extra installed, and keeps this process free of torch and
+open3d, so the light client, the simulator and the tests start one alike.
 """
 
 from __future__ import annotations

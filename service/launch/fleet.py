@@ -1,10 +1,11 @@
 """A fleet on one machine: N service processes behind HAProxy, started, watched and stopped
 together (``vgn-client serve --replicas N``).
 
-Each replica is a uvicorn child (``service.launch.embedded``) on loopback ports of its own, HTTP and
-gRPC; HAProxy (``service.launch.haproxy``) listens on the fleet's ports and routes each session to one
-replica. Every child ends with this process, however it ends (``service.launch.lifetime``): HAProxy is
-started through a Python shim that asks for that and then becomes HAProxy. A replica that
+Each replica is a uvicorn child (``service.launch.embedded``) on loopback ports of its own,
+HTTP and gRPC; HAProxy (``service.launch.haproxy``) listens on the fleet's ports and routes each
+session to one replica. Every child ends with this process, however it ends
+(``service.launch.lifetime``): HAProxy is started through a Python shim that asks for that and
+then becomes HAProxy. A replica that
 dies is started again on its ports (unless ``restart`` is off); its sessions move to the other
 replicas meanwhile and back once it is up, rebuilt each time by their clients.
 """
