@@ -8,6 +8,7 @@ RUN apt-get update \
 
 WORKDIR /app
 COPY pyproject.toml README.md ./
+COPY vgn_contract vgn_contract
 COPY client client
 COPY service service
 COPY sim_worker sim_worker

@@ -34,14 +34,14 @@ from benchmarks.chart import write_chart
 from benchmarks.paper import PAPER_GPD, PAPER_TABLE_1, SCENARIOS
 from benchmarks.report import no_grasp_cell, this_machine
 from client.cli import add_check_switches, add_gripper_option, add_looking_options, add_ray_option
-from client.embedded import EmbeddedService
-from client.gripper_description import DEFAULT_GRIPPER
 from client.http import VGNClient
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspDefaults
+from service.launch.embedded import EmbeddedService
 from sim_worker.clear_scene import grasp_defaults, resolve_planner, run_episode
 from sim_worker.clutter import ClutterConfig, looking
 from sim_worker.metrics import FAILURE_CLASSES, summarize
 from sim_worker.results import ResultsFolder
+from vgn_contract.gripper_description import DEFAULT_GRIPPER
+from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspDefaults
 from vgn_data.files import write_atomically
 
 if TYPE_CHECKING:

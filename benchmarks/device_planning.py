@@ -44,11 +44,11 @@ prepare_environment()  # the server's OpenMP defaults (service.app), before anyt
 import torch  # noqa: E402
 
 from benchmarks.report import cpu_model, device_planning_table  # noqa: E402
-from client.schemas import GraspQuery  # noqa: E402
 from service.clearance import clear_grasps  # noqa: E402
 from service.grip import MIN_GRIP_FRAMES, gripping_grasps  # noqa: E402
 from service.planner import HEADS, GraspPlanner, InferenceOptions  # noqa: E402
 from service.vgn.checkpoint import weights_id  # noqa: E402
+from vgn_contract.schemas import GraspQuery  # noqa: E402
 
 # Not service.settings.PACKAGED_MODEL: that module needs pydantic-settings, which a GPU machine may lack.
 PACKAGED_MODEL = Path(__file__).resolve().parents[1] / "service" / "models" / "vgn.safetensors"
@@ -57,10 +57,10 @@ PACKAGED_MODEL = Path(__file__).resolve().parents[1] / "service" / "models" / "v
 def record(out: Path) -> dict[str, Any]:
     """Fuse the box scene's six views in a real session and save what a request reads."""
     from benchmarks.workload import render_frames
-    from client.schemas import SessionCreate
     from service.core import PlanningService
     from service.settings import Settings
     from tests.helpers.scenes import INTRINSICS
+    from vgn_contract.schemas import SessionCreate
 
     core = PlanningService(Settings(), GraspPlanner.from_path(None, "cpu"))
     try:

@@ -2,7 +2,7 @@
 
     python -m benchmarks.fleet [--repeats N] [--rounds R] [--window S] [--workers W] [--json PATH]
 
-One run starts two fleets side by side (``client.fleet``: uvicorn replicas behind HAProxy), one
+One run starts two fleets side by side (``service.launch.fleet``: uvicorn replicas behind HAProxy), one
 with one replica and one with two, in the service's default configuration, and measures
 
 1. the proxy's added latency: a grasp request (the default one, turn-averaged and
@@ -44,10 +44,10 @@ import numpy as np
 from benchmarks.latency import load_average, write_json
 from benchmarks.timing import Measurement, Operation, find, run_interleaved
 from benchmarks.workload import INTRINSICS, MAX_DEPTH, RUNTIME_VARIABLES, Frames, render_frames
-from client.embedded import free_port
-from client.fleet import Fleet, FleetConfig
 from client.grpc_client import GRPCClient
 from client.http import VGNClient
+from service.launch.embedded import free_port
+from service.launch.fleet import Fleet, FleetConfig
 from service.settings import PACKAGED_MODEL
 
 ADDED_TARGET_MS = 1.0

@@ -26,15 +26,15 @@ from pathlib import Path
 import numpy as np
 
 from client.connect import connect
-from client.embedded import EmbeddedService
-from client.schemas import Grasp
 from service.checks import SUPPORT_CONTACT_TOLERANCE, contact_tolerances
 from service.clearance import approach_is_clear
 from service.grid_surface import grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
+from service.launch.embedded import EmbeddedService
 from sim_worker.clutter import MAX_CONSECUTIVE_FAILURES, ClutterConfig, ClutterRemoval
 from sim_worker.grasping import Outcome, execute_grasp
 from sim_worker.results import ResultsFolder
+from vgn_contract.schemas import Grasp
 from vgn_data.files import write_atomically
 
 #: The threshold of the answer the benchmark advances with (the shipped model's operating one).

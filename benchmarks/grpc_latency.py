@@ -39,9 +39,9 @@ from benchmarks.workload import (
     WORKSPACE_SIZE,
     Frames,
 )
-from client.embedded import EmbeddedService
 from client.grpc_client import GRPCClient
 from client.http import VGNClient
+from service.launch.embedded import EmbeddedService
 from service.tsdf import TSDFVolume
 
 STREAM_FRAMES = 60

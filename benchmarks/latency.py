@@ -113,10 +113,9 @@ from benchmarks.workload import (
     Frames,
     render_frames,
 )
-from client.embedded import EmbeddedService
 from client.http import FRAME_META_HEADER, VGNClient
-from client.schemas import SWITCHES, FrameMeta, GraspQuery, ModelInfo, Pose, SessionCreate
 from service.core import PlanningService
+from service.launch.embedded import EmbeddedService
 from service.planner import resolve_device, resolve_precision
 from service.runtime import configured_threads
 from service.settings import PACKAGED_MODEL, Settings
@@ -125,6 +124,7 @@ from service.vgn.checkpoint import load_vgn, save_vgn, weights_id
 from service.vgn.detection import DetectionConfig, detect_grasps
 from service.vgn.fast import FastVGN
 from service.vgn.network import VGN
+from vgn_contract.schemas import SWITCHES, FrameMeta, GraspQuery, ModelInfo, Pose, SessionCreate
 
 warnings.filterwarnings("ignore", category=DeprecationWarning)
 

@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from client.embedded import EmbeddedService
+from service.launch.embedded import EmbeddedService
 
 LABELLED = re.compile(r"labelled (\d+) grasps in ([\d.]+) s")
 

@@ -33,13 +33,13 @@ from typing import Any
 import numpy as np
 
 from client.connect import connect
-from client.embedded import EmbeddedService
-from client.geometry import matrix_from_pose
+from service.launch.embedded import EmbeddedService
 from sim_worker.clutter import MAX_CONSECUTIVE_FAILURES, ClutterConfig, ClutterRemoval
 from sim_worker.grasping import LIFT_DISTANCE, Outcome, execute_grasp
 from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.results import ResultsFolder
 from sim_worker.world import World
+from vgn_contract.geometry import matrix_from_pose
 from vgn_data.files import write_atomically
 
 GRAVITY = 9.81

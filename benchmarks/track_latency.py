@@ -28,9 +28,9 @@ from typing import Any
 
 from benchmarks.timing import Measurement, Operation, find, run_interleaved
 from benchmarks.workload import INTRINSICS, Frames, render_frames
-from client.embedded import EmbeddedService
 from client.grpc_client import GRPCClient
 from client.http import VGNClient
+from service.launch.embedded import EmbeddedService
 from vgn_data.files import write_atomically
 
 CYCLE_TARGET_MS = 33.0

@@ -1,5 +1,6 @@
 """Typed client for vgn-service: ``VGNClient`` / ``AsyncVGNClient``, ``GRPCClient`` and the
-shared schemas, and the robot-side poses of a grasp (``client.robot``).
+schemas both sides share (defined in ``vgn_contract``), and the robot-side poses of a grasp
+(``client.robot``).
 
 Installs without torch, open3d or pybullet; ``GRPCClient`` (and ``connect(url)`` for
 ``grpc://`` URLs) needs the ``grpc`` extra, which is imported only when it is first used.
@@ -24,7 +25,7 @@ from client.http import (
     VGNError,
 )
 from client.robot import nearest_turn, pregrasp_pose, retreat_pose, tool_offset, tool_pose
-from client.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
+from vgn_contract.schemas import Grasp, GraspQuery, GraspResult, Intrinsics, Pose, SessionInfo, Workspace
 
 if TYPE_CHECKING:
     from client.grpc_client import GRPCClient as GRPCClient

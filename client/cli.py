@@ -15,11 +15,9 @@
 from __future__ import annotations
 
 import argparse
-import errno
 import importlib
 import json
 import os
-import signal
 import sys
 import tempfile
 import webbrowser
@@ -31,18 +29,17 @@ from typing import Literal, get_args, get_origin
 import httpx
 
 from client.connect import connect, is_grpc_url
-from client.embedded import bind_error
 from client.extras import missing_extra
-from client.gripper_description import (
+from client.http import DEFAULT_URL, InvalidRequest, VGNClient, VGNError
+from client.log_level import add_log_level_option, configure_logging
+from vgn_contract.gripper_description import (
     DEFAULT_GRIPPER,
     GripperDescription,
     GripperDescriptionError,
     builtin_grippers,
     load_gripper,
 )
-from client.http import DEFAULT_URL, InvalidRequest, VGNClient, VGNError
-from client.log_level import add_log_level_option, configure_logging
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspQuery
+from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspQuery
 
 TURN_AVERAGE_HELP = (
     "score and orient grasps by the network's outputs averaged over four quarter turns of the grid, or not "
@@ -110,7 +107,7 @@ def add_gripper_option(parser: argparse.ArgumentParser) -> None:
 
 
 def add_query_options(parser: argparse.ArgumentParser, max_grasps: int) -> None:
-    """One flag per grasp query option (``client.schemas.GraspQuery``), derived from its fields:
+    """One flag per grasp query option (``vgn_contract.schemas.GraspQuery``), derived from its fields:
     choices, types and help as the schema declares them; the switches as :func:`add_check_switches`.
     ``max_grasps`` is the command's default (``--top`` is its older name)."""
     for name, field in GraspQuery.model_fields.items():
@@ -324,76 +321,6 @@ def _add_clear_scene(commands: argparse._SubParsersAction[argparse.ArgumentParse
     )
 
 
-def _serve(args: argparse.Namespace) -> int:
-    try:
-        import uvicorn
-    except ImportError:
-        print(f"error: {missing_extra('serving', 'service')}", file=sys.stderr)
-        return 2
-    if args.replicas is not None:
-        return _serve_fleet(args)
-    if args.model:
-        os.environ["VGN_MODEL"] = args.model
-    if args.grpc_port is not None:
-        os.environ["VGN_GRPC_PORT"] = str(args.grpc_port)
-    os.environ.setdefault("VGN_GRPC_HOST", args.host)
-    grpc_port = os.environ.get("VGN_GRPC_PORT") or "50051"  # the service checks the value
-    grpc_host = os.environ["VGN_GRPC_HOST"]
-    listeners = [("port", args.host, args.port, "--port")]
-    if grpc_port.isdigit() and grpc_port != "0":
-        listeners.append(
-            ("gRPC port", grpc_host, int(grpc_port), "--grpc-port, or --grpc-port 0 for no gRPC")
-        )
-    for problem in filter(None, (_listen_problem(*listener) for listener in listeners)):
-        print(f"error: {problem}", file=sys.stderr)
-        return 1
-    grpc = f"gRPC on grpc://{grpc_host}:{grpc_port}" if grpc_port != "0" else "gRPC off"
-    print(f"serving HTTP on http://{args.host}:{args.port}, {grpc}", file=sys.stderr)
-    uvicorn.run("service.app:app", host=args.host, port=args.port)
-    return 0
-
-
-def _serve_fleet(args: argparse.Namespace) -> int:
-    """``serve --replicas N``: the fleet runs until Ctrl-C or SIGTERM, then stops as a whole."""
-    from client.fleet import Fleet, FleetConfig, FleetError
-
-    grpc_port = 50051 if args.grpc_port is None else args.grpc_port
-    config = FleetConfig(args.replicas, args.host, args.port, grpc_port or None, args.model)
-    signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(0))  # unwinds through stop() below
-    fleet = None
-    try:
-        fleet = Fleet(config)
-        print(f"starting {args.replicas} replicas and HAProxy ...", file=sys.stderr)
-        fleet.start()
-        grpc = f", gRPC on {fleet.grpc_url}" if fleet.grpc_url else ", gRPC off"
-        print(
-            f"serving HTTP on {fleet.url}{grpc} through HAProxy, {args.replicas} replicas:", file=sys.stderr
-        )
-        for replica in fleet.replicas:
-            print(f"  {replica.url}  {replica.grpc_url}  (pid {replica.pid})", file=sys.stderr)
-        fleet.watch()
-    except FleetError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if fleet is not None:
-            fleet.stop()
-    return 0
-
-
-def _listen_problem(name: str, host: str, port: int, option: str) -> str | None:
-    """Why the service could not listen on ``host:port``, checked before it starts: otherwise
-    it loads the model first and then fails with a traceback from deep inside its start-up."""
-    error = bind_error(host, port)
-    if error is None:
-        return None
-    if error.errno == errno.EADDRINUSE:
-        return f"{name} {port} is in use on {host} (another vgn-client serve?): pick another with {option}"
-    return f"cannot listen on {host}:{port} ({error.strerror or error})"
-
-
 def _status(vgn: VGNClient) -> int:
     vgn.health()
     readiness = vgn.ready()
@@ -460,6 +387,9 @@ def _view(vgn: VGNClient, args: argparse.Namespace) -> int:
     return 0
 
 
+#: ``serve`` starts the server (one process, or a fleet behind HAProxy): it lives beside the server it
+#: starts, in the launch package, which needs no more than this one to import.
+SERVE_COMMAND = "service.launch.serve"
 #: The simulator commands live in sim_worker (they import pybullet); this is where each one runs.
 SIM_COMMANDS = {"clear-scene": "sim_worker.clear_scene", "generate-data": "sim_worker.generate_data"}
 #: The dataset commands belong to vgn_data (which builds on this package, so it is never imported
@@ -507,7 +437,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     configure_logging(args.log_level)
     if args.command == "serve":
-        return _serve(args)
+        return importlib.import_module(SERVE_COMMAND).run(args)
     if args.command in SIM_COMMANDS:
         return _run_sim_command(args)
     if args.command in DATA_COMMANDS:

@@ -22,12 +22,12 @@ import grpc
 import numpy as np
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
-from client.grpc_api import convert
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.http import _ERROR_TYPES, VGNError, encode_depth, frame_meta, grasp_query, session_spec
 from client.recovery import DEFAULT_REPLAY, Rebuild, Replay, SessionJournal, is_lost
-from client.schemas import (
+from vgn_contract.grpc_api import convert
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
+from vgn_contract.schemas import (
     SESSION_ID_HEADER,
     FrameResult,
     GraspResult,

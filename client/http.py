@@ -23,7 +23,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from client.recovery import DEFAULT_REPLAY, Rebuild, Replay, SessionJournal, is_lost, new_session_id
-from client.schemas import (
+from vgn_contract.schemas import (
     SESSION_ID_HEADER,
     FrameMeta,
     FrameResult,
@@ -39,8 +39,8 @@ from client.schemas import (
     SessionList,
     Workspace,
 )
-from client.snapshot import MEDIA_TYPE as SNAPSHOT_MEDIA_TYPE
-from client.snapshot import meta_of
+from vgn_contract.snapshot import MEDIA_TYPE as SNAPSHOT_MEDIA_TYPE
+from vgn_contract.snapshot import meta_of
 
 T = TypeVar("T")
 DEFAULT_URL = "http://127.0.0.1:8000"
@@ -462,7 +462,7 @@ class VGNClient:
         return self._on_session(session_id, Calls.cloud(session_id))
 
     def snapshot(self, session_id: str) -> bytes:
-        """The session as one compact file (settings, frame count, fused volumes; ``client.snapshot``),
+        """The session as one compact file (settings, frame count, fused volumes; ``vgn_contract.snapshot``),
         for ``import_session`` here or on another service."""
         return self._on_session(session_id, Calls.snapshot(session_id))
 

@@ -23,7 +23,7 @@ from typing import Any, Protocol, TypeVar
 
 import httpx
 
-from client.schemas import SessionCreate
+from vgn_contract.schemas import SessionCreate
 
 T = TypeVar("T")
 #: Statuses a proxy answers with itself while a replica is gone (the service's own carry JSON).

@@ -15,9 +15,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from client.geometry import check_rigid_matrix, invert
-from client.gripper_description import GripperDescription, default_gripper, load_gripper
-from client.schemas import Grasp, Pose
+from vgn_contract.geometry import check_rigid_matrix, invert
+from vgn_contract.gripper_description import GripperDescription, default_gripper, load_gripper
+from vgn_contract.schemas import Grasp, Pose
 
 #: A grasp or a pose given as the client's schema or as a 4×4 matrix.
 PoseLike = Grasp | Pose | np.ndarray | Sequence[Sequence[float]]

@@ -16,8 +16,8 @@ import numpy as np
 from PIL import Image
 from selenium.webdriver.support.ui import WebDriverWait
 
-from client.embedded import EmbeddedService
 from client.http import VGNClient
+from service.launch.embedded import EmbeddedService
 from sim_worker.camera import SIM_INTRINSICS, Camera, six_views
 from sim_worker.objects import object_set
 from sim_worker.scenes import generate_scene

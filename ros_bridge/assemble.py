@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 from sensor_msgs.msg import CameraInfo, Image
 
-from client.schemas import Intrinsics, Pose
 from ros_bridge.convert import depth_array, intrinsics, seconds
 from ros_bridge.poses import PoseSource
 from ros_bridge.problems import Refused, Waiting
+from vgn_contract.schemas import Intrinsics, Pose
 
 
 @dataclass(frozen=True)

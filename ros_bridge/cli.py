@@ -6,7 +6,7 @@ import sys
 from enum import Enum
 
 from client.extras import missing_extra
-from client.lifetime import end_with_parent_if_asked
+from service.launch.lifetime import end_with_parent_if_asked
 
 
 def usage() -> str:

@@ -14,8 +14,8 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 from pydantic import ValidationError
 from sensor_msgs.msg import CameraInfo, Image
 
-from client.schemas import Intrinsics, Pose
 from ros_bridge.problems import Refused
+from vgn_contract.schemas import Intrinsics, Pose
 
 #: Depth encodings the bridge fuses (REP 118): unsigned 16-bit millimetres or float32 metres.
 DEPTH_ENCODINGS = {"16UC1": np.dtype(np.uint16), "mono16": np.dtype(np.uint16), "32FC1": np.dtype(np.float32)}

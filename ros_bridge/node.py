@@ -22,12 +22,12 @@ from visualization_msgs.msg import MarkerArray
 from client.connect import connect
 from client.http import NotFound, VGNError
 from client.recovery import Replay
-from client.schemas import Grasp, GraspResult
 from ros_bridge import outputs, settings
 from ros_bridge.assemble import Frame, FrameAssembler
 from ros_bridge.poses import FixedPose, PoseSource, TfPoses, TopicPoses
 from ros_bridge.problems import Complaints, Refused
 from ros_bridge.stream import Ended, TrackStream, Update
+from vgn_contract.schemas import Grasp, GraspResult
 
 #: What a call to an unreachable or failing service raises, over HTTP and gRPC.
 SERVICE_ERRORS = (VGNError, httpx.TransportError, ConnectionError, TimeoutError)

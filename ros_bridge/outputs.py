@@ -12,8 +12,8 @@ from geometry_msgs.msg import Pose as PoseMsg
 from std_msgs.msg import ColorRGBA, Float32MultiArray, Header, MultiArrayDimension
 from visualization_msgs.msg import Marker, MarkerArray
 
-from client.geometry import gripper_outline, matrix_from_pose
-from client.schemas import Grasp
+from vgn_contract.geometry import gripper_outline, matrix_from_pose
+from vgn_contract.schemas import Grasp
 
 #: Line width of the drawn gripper outlines (metres).
 LINE_WIDTH = 0.002

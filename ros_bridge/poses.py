@@ -11,9 +11,9 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from geometry_msgs.msg import PoseStamped, TransformStamped
 
-from client.schemas import Pose
 from ros_bridge.convert import camera_pose, seconds
 from ros_bridge.problems import Refused, Waiting
+from vgn_contract.schemas import Pose
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -15,8 +15,8 @@ from rclpy.parameter import Parameter
 
 from client.connect import is_grpc_url
 from client.http import grasp_query
-from client.schemas import SWITCHES, Pose, Workspace
 from ros_bridge.convert import fixed_pose
+from vgn_contract.schemas import SWITCHES, Pose, Workspace
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -16,8 +16,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from client.schemas import GraspResult, Pose
 from ros_bridge.assemble import Frame
+from vgn_contract.schemas import GraspResult, Pose
 
 
 class TrackClient(Protocol):

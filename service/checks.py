@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp
 from service.clearance import ClearanceConfig, approach_is_clear, fingers_inside
 from service.grip import GripConfig, GripMeasure, measure_grip, support_height
 from service.hands import active_hand
+from vgn_contract.schemas import Grasp
 
 #: Alternative hand poses tried for a dropped grasp, as (turn about the approach, tilt of the
 #: approach about the closing axis) in degrees and a step back along the approach in metres: turns

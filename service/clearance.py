@@ -5,7 +5,7 @@ opening 5 cm back along the approach and moves it straight to the grasp pose. A 
 *clear* when none of the hand's parts, swept along that path, comes near more than
 ``min_points - 1`` observed surface points; points between the fingers never count.
 
-The hand is the session's gripper description (``client.gripper_description``; by default
+The hand is the session's gripper description (``vgn_contract.gripper_description``; by default
 ``franka``, whose boxes a test compares with ``sim_worker/assets/gripper.urdf``), every part a
 box in the grasp frame (docs/conventions.md), each swept box tested exactly for the points
 inside the swept hand's bounding box. The service passes the zero crossings of the session's
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.gripper_description import GripperDescription
-from client.schemas import Grasp
 from service.hands import active_hand
+from vgn_contract.gripper_description import GripperDescription
+from vgn_contract.schemas import Grasp
 
 #: (grasp, point) pairs moved into grasp frames at once (24 MB of float64 coordinates).
 _CHUNK = 1 << 20

@@ -10,22 +10,6 @@ import time
 
 import numpy as np
 
-from client.gripper_description import DEFAULT_GRIPPER
-from client.schemas import (
-    ANTIPODAL_DEFAULT_THRESHOLD,
-    FrameMeta,
-    FrameResult,
-    GraspDefaults,
-    GraspQuery,
-    GraspResult,
-    GripperInfo,
-    GripperList,
-    Intrinsics,
-    ModelInfo,
-    RuntimeInfo,
-    SessionCreate,
-    SessionInfo,
-)
 from service.baseline import plan_antipodal
 from service.checks import check_grasps
 from service.cloud_fusion import CloudFusion
@@ -46,6 +30,22 @@ from service.settings import Settings
 from service.snapshot import Snapshot
 from service.snapshot import decode as decode_snapshot
 from service.snapshot import encode as encode_snapshot
+from vgn_contract.gripper_description import DEFAULT_GRIPPER
+from vgn_contract.schemas import (
+    ANTIPODAL_DEFAULT_THRESHOLD,
+    FrameMeta,
+    FrameResult,
+    GraspDefaults,
+    GraspQuery,
+    GraspResult,
+    GripperInfo,
+    GripperList,
+    Intrinsics,
+    ModelInfo,
+    RuntimeInfo,
+    SessionCreate,
+    SessionInfo,
+)
 
 CONVENTIONS = {
     "units": "metres, seconds; angles in query parameters in degrees",

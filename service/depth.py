@@ -7,8 +7,8 @@ import io
 import numpy as np
 from PIL import Image, UnidentifiedImageError
 
-from client.schemas import Intrinsics
 from service.errors import InvalidInput, UnsupportedMediaType
+from vgn_contract.schemas import Intrinsics
 
 PNG_MEDIA_TYPE = "image/png"
 RAW_MEDIA_TYPE = "application/octet-stream"

@@ -20,9 +20,9 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 from scipy.spatial.transform import Rotation
 
-from client.gripper_description import GripperDescription
-from client.schemas import Grasp
 from service.hands import active_hand
+from vgn_contract.gripper_description import GripperDescription
+from vgn_contract.schemas import Grasp
 
 #: Ray step (m): a quarter of a default voxel.
 STEP = 0.002

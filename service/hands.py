@@ -1,6 +1,6 @@
 """The hands the service plans for: which it knows, which a network serves, and the one in use.
 
-The service knows the built-in descriptions (``client/grippers/``) and the files its operator
+The service knows the built-in descriptions (``vgn_contract/grippers/``) and the files its operator
 adds (``VGN_GRIPPERS``); a session names one (default ``franka``) and is refused when the hand
 is unknown or no loaded network was trained for it, since a network's grasps are what its
 hand could do. While a session's grasps are checked, :func:`planning_for` makes its hand the
@@ -16,7 +16,8 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 
-from client.gripper_description import (
+from service.errors import GripperNotServed, InvalidInput
+from vgn_contract.gripper_description import (
     DEFAULT_GRIPPER,
     GripperDescription,
     builtin_gripper,
@@ -24,7 +25,6 @@ from client.gripper_description import (
     default_gripper,
     read_gripper,
 )
-from service.errors import GripperNotServed, InvalidInput
 
 _ACTIVE: ContextVar[GripperDescription | None] = ContextVar("vgn_gripper", default=None)
 

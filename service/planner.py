@@ -12,7 +12,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD, Grasp, GraspQuery
 from service.baseline import AntipodalConfig
 from service.errors import ModelNotReady
 from service.runtime import usable_cores
@@ -23,6 +22,7 @@ from service.vgn.fast import FastVGN
 from service.vgn.network import PARAMETER_COUNT, VGN
 from service.vgn.outputs import ComputedHeads, HeadsOnDemand, NetworkOutput
 from service.vgn.turns import average_turned_quality, turned_grids
+from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD, Grasp, GraspQuery
 
 NO_MODEL_MESSAGE = "no model is configured: set VGN_MODEL to a VGN weights file (.safetensors, .pt or .pth)"
 

@@ -11,12 +11,12 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-from client.gripper_description import GripperDescription, default_gripper
-from client.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
 from service.cloud_fusion import CloudFusion, shared_fusion
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
 from service.snapshot import Snapshot
 from service.tsdf import SceneVolume
+from vgn_contract.gripper_description import GripperDescription, default_gripper
+from vgn_contract.schemas import Intrinsics, SessionCreate, SessionInfo, Workspace
 
 
 @dataclass

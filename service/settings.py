@@ -8,8 +8,8 @@ from typing import Literal
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from client.gripper_description import DEFAULT_GRIPPER
 from service.grip import GripConfig
+from vgn_contract.gripper_description import DEFAULT_GRIPPER
 
 #: The packaged default model; the service uses it when ``VGN_MODEL`` is unset.
 PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"

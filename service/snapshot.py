@@ -1,7 +1,7 @@
 """Session snapshots: a session's fused volumes and settings as one compact file, so that a
 session can leave a service (an operator draining a replica) and carry on in another.
 
-The format is ``client.snapshot``'s. Reading one checks everything before a session is
+The format is ``vgn_contract.snapshot``'s. Reading one checks everything before a session is
 built from it: the members and their array headers (shape and dtype, read before any data,
 so a small upload cannot declare a huge array), the settings by the API's own schemas, and the
 voxels (finite, tsdf in [-1, 1], weights not negative).
@@ -19,10 +19,10 @@ from typing import IO
 import numpy as np
 from pydantic import ValidationError
 
-from client import snapshot as fmt
-from client.gripper_description import DEFAULT_GRIPPER, NAME_PATTERN
-from client.schemas import SESSION_ID_PATTERN, Intrinsics, Workspace
 from service.errors import InvalidInput
+from vgn_contract import snapshot as fmt
+from vgn_contract.gripper_description import DEFAULT_GRIPPER, NAME_PATTERN
+from vgn_contract.schemas import SESSION_ID_PATTERN, Intrinsics, Workspace
 
 #: Largest fine (cloud) volume a snapshot may carry, voxels a side (``VGN_CLOUD_RESOLUTION``'s bound).
 MAX_FINE_RESOLUTION = 400

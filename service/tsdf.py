@@ -10,9 +10,9 @@ import numpy as np
 import open3d as o3d
 import torch
 
-from client.geometry import invert
-from client.schemas import Intrinsics
 from service.cloud_fusion import CloudFusion, shared_fusion
+from vgn_contract.geometry import invert
+from vgn_contract.schemas import Intrinsics
 
 #: Truncation distance in voxels (docs/conventions.md).
 TRUNCATION_VOXELS = 4

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet
 
-from client.geometry import invert
-from client.schemas import Intrinsics
 from sim_worker.world import World
+from vgn_contract.geometry import invert
+from vgn_contract.schemas import Intrinsics
 
 #: The simulated camera of VGN/GIGA: 640×480, fx = fy = 540, principal point at the centre.
 SIM_INTRINSICS = Intrinsics(width=640, height=480, fx=540.0, fy=540.0, cx=320.0, cy=240.0)

@@ -14,14 +14,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 from client.connect import connect
-from client.embedded import EmbeddedService
-from client.gripper_description import GripperDescriptionError, default_gripper
 from client.http import VGNClient, VGNError
-from client.schemas import GraspDefaults
+from service.launch.embedded import EmbeddedService
 from sim_worker.clutter import SERVICE_OPTIONS, ClutterConfig, ClutterRemoval, ServiceDefaultsError
 from sim_worker.hand_urdf import hand_urdf
 from sim_worker.metrics import summary_table
 from sim_worker.results import ResultsFolder, RoundRecord
+from vgn_contract.gripper_description import GripperDescriptionError, default_gripper
+from vgn_contract.schemas import GraspDefaults
 
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from client.http import VGNClient
-from client.schemas import GraspResult
-from client.tracking import GraspTracker
 from sim_worker.camera import WORKSPACE_CENTRE, Camera, camera_on_sphere
+from vgn_contract.schemas import GraspResult
+from vgn_contract.tracking import GraspTracker
 
 #: The fixed cameras look every this many 2 mm approach steps: 0.1 s at 10 cm/s, 10 Hz.
 WATCH_EVERY_STEPS = 5

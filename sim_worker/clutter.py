@@ -15,9 +15,7 @@ from typing import Literal
 
 import numpy as np
 
-from client.gripper_description import GripperDescription, default_gripper
 from client.http import VGNClient
-from client.schemas import SWITCHES, Grasp, GraspResult
 from sim_worker import images
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views, side_view, six_views
 from sim_worker.closed_loop import (
@@ -37,6 +35,8 @@ from sim_worker.sensors import PoseError, StructuredLightNoise
 from sim_worker.service_session import fresh_session
 from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
 from sim_worker.world import Renderer, World
+from vgn_contract.gripper_description import GripperDescription, default_gripper
+from vgn_contract.schemas import SWITCHES, Grasp, GraspResult
 
 MAX_CONSECUTIVE_FAILURES = 2
 #: A closed loop that withdrew this many times in a row ends the round (the scene keeps changing).

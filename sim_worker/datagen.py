@@ -20,7 +20,6 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.gripper_description import GripperDescription, default_gripper
 from client.http import VGNClient
 from sim_worker.camera import SIM_INTRINSICS, Camera, DepthNoise, random_views
 from sim_worker.grasping import execute_grasp
@@ -38,6 +37,7 @@ from sim_worker.scenes import generate_scene, poisson_object_count
 from sim_worker.service_session import fresh_session
 from sim_worker.settings_checks import check_at_least, check_choice, check_fraction
 from sim_worker.world import WORKSPACE_SIZE, Renderer, World
+from vgn_contract.gripper_description import GripperDescription, default_gripper
 from vgn_data.dataset import VALID_LOWER, VALID_UPPER, DatasetSetup, RawDataset, SceneViews
 
 #: Normals must point at least this much upwards: grasps from below the table are pointless.

@@ -17,10 +17,10 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from client.embedded import EmbeddedService
-from client.gripper_description import check_version, default_gripper
+from service.launch.embedded import EmbeddedService
 from sim_worker.datagen import DataGenConfig, dataset_setup, scene_id
 from sim_worker.hand_urdf import hand_urdf
+from vgn_contract.gripper_description import check_version, default_gripper
 from vgn_data.dataset import RawDataset
 from vgn_data.files import check_settings, remove_stale_temporaries
 
@@ -38,7 +38,7 @@ def _worker(
 ) -> None:
     """One simulator process: its own PyBullet world and client, its share of the scenes."""
     from client.connect import connect
-    from client.lifetime import end_with_parent
+    from service.launch.lifetime import end_with_parent
 
     end_with_parent()  # a killed command must not leave workers labelling on
     from sim_worker.datagen import generate

@@ -1,6 +1,6 @@
 """A free-floating parallel-jaw gripper whose base frame is the grasp frame (docs/conventions.md).
 
-The hand is a gripper description (client/grippers/, or a user's file; default ``franka``): its
+The hand is a gripper description (vgn_contract/grippers/, or a user's file; default ``franka``): its
 URDF (the one it names, else one built from its boxes: sim_worker/hand_urdf.py), opening, finger
 depth, closing force and pre-grasp distance all come from there."""
 
@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet
 
-from client.geometry import pose_from_matrix
-from client.gripper_description import GripperDescription, default_gripper
 from sim_worker.hand_urdf import hand_urdf
 from sim_worker.world import World
+from vgn_contract.geometry import pose_from_matrix
+from vgn_contract.gripper_description import GripperDescription, default_gripper
 
 #: The default simulated hand: ``franka``, the hand of every dataset and result so far.
 HAND: GripperDescription = default_gripper()
@@ -157,7 +157,7 @@ class Gripper:
     def pose(self) -> np.ndarray:
         """The hand's grasp frame now, 4×4 world."""
         position, orientation = self.world.p.getBasePositionAndOrientation(self.body)
-        from client.geometry import matrix_from_pose
+        from vgn_contract.geometry import matrix_from_pose
 
         return matrix_from_pose(np.asarray(position), np.asarray(orientation))
 

@@ -14,8 +14,8 @@ import math
 from collections.abc import Iterable
 from pathlib import Path
 
-from client.gripper_description import Box, GripperDescription, GripperDescriptionError
 from sim_worker.objects import default_cache_dir, write_atomic
+from vgn_contract.gripper_description import Box, GripperDescription, GripperDescriptionError
 
 #: The folder that holds the packages: a description's relative ``urdf`` path starts there.
 REPOSITORY = Path(__file__).resolve().parents[1]

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from client.geometry import gripper_outline, invert
-from client.schemas import Grasp, Intrinsics
 from sim_worker.results import RoundRecord
+from vgn_contract.geometry import gripper_outline, invert
+from vgn_contract.schemas import Grasp, Intrinsics
 
 GRASP_COLOUR = (255, 0, 200)
 SUCCESS_COLOUR = (30, 160, 60)

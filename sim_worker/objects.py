@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 #: VGN's global scale for its block set (``{"blocks": 1.67}`` in its simulation).
 BLOCKS_SCALE = 1.67
 #: An object is graspable when some horizontal extent is at most this: a margin under the
-#: ``franka`` hand's 0.08 m opening (client/grippers/franka.json), which the object sets are sized for.
+#: ``franka`` hand's 0.08 m opening (vgn_contract/grippers/franka.json), which the object sets are sized for.
 MAX_GRASP_EXTENT = 0.07
 #: Named pybullet_data objects that are too wide are scaled down to this horizontal extent.
 RESCALE_TARGET = 0.065

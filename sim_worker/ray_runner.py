@@ -106,7 +106,7 @@ class ServiceHost:
     """Owns the embedded service of one node (a Ray actor pinned to it, using no CPU slot)."""
 
     def __init__(self, service_options: dict) -> None:
-        from client.embedded import EmbeddedService
+        from service.launch.embedded import EmbeddedService
 
         self.service = EmbeddedService(**service_options).start()
 
@@ -142,7 +142,7 @@ class SimWorker:
         try:
             host = ray.get_actor(f"{SERVICE_ACTOR_PREFIX}-{node_id}")
         except ValueError:
-            from client.embedded import EmbeddedService
+            from service.launch.embedded import EmbeddedService
 
             self.own_service = EmbeddedService(**service_options).start()
             return self.own_service.url

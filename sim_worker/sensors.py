@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Intrinsics
+from vgn_contract.schemas import Intrinsics
 
 
 def _camera_points(depth: np.ndarray, intrinsics: Intrinsics) -> np.ndarray:

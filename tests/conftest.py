@@ -16,10 +16,10 @@ from pathlib import Path
 import pytest
 import torch
 
-from client.embedded import EmbeddedService
 from client.http import VGNClient
 from service.core import PlanningService
 from service.http_app import create_app
+from service.launch.embedded import EmbeddedService
 from service.settings import Settings
 from service.vgn.checkpoint import save_vgn
 from service.vgn.network import VGN

@@ -19,30 +19,54 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: What each package may import of the others (its own modules always). ``benchmarks`` may use
-#: anything, and is in no other package's set: nothing that ships may depend on a benchmark.
+#: What each package may import of the others (its own modules always). A dotted name is a
+#: subpackage: as a key, its rule replaces its package's for its modules; in a set, it allows that
+#: subpackage alone. ``vgn_contract`` (the wire contract both sides build on) imports nothing of
+#: ours. ``service.launch`` starts the server in child processes and imports none of it, so the
+#: simulator and the ROS bridge may start a service without depending on the server's code.
+#: ``client.extras`` is the one wording of a missing extra, which the server's commands use too.
+#: ``benchmarks`` may use anything, and is in no other package's set: nothing that ships may
+#: depend on a benchmark.
 RULES: dict[str, frozenset[str]] = {
-    "client": frozenset(),
-    "vgn_data": frozenset({"client"}),
-    "service": frozenset({"client", "vgn_data"}),
-    "sim_worker": frozenset({"client", "vgn_data"}),
-    "training": frozenset({"client", "vgn_data", "service", "sim_worker"}),
-    "ros_bridge": frozenset({"client"}),
-    "benchmarks": frozenset({"client", "vgn_data", "service", "sim_worker", "training", "ros_bridge"}),
+    "vgn_contract": frozenset(),
+    "client": frozenset({"vgn_contract"}),
+    "vgn_data": frozenset({"vgn_contract"}),
+    "service": frozenset({"vgn_contract", "vgn_data", "client.extras"}),
+    "service.launch": frozenset({"vgn_contract", "client.extras"}),
+    "sim_worker": frozenset({"vgn_contract", "client", "vgn_data", "service.launch"}),
+    "training": frozenset({"vgn_contract", "client", "vgn_data", "service", "sim_worker"}),
+    "ros_bridge": frozenset({"vgn_contract", "client", "service.launch"}),
+    "benchmarks": frozenset(
+        {"vgn_contract", "client", "vgn_data", "service", "sim_worker", "training", "ros_bridge"}
+    ),
 }
 
 #: Modules a package names in a string to run them, not to import their code: ``vgn-client serve``
-#: starts the service with uvicorn, the embedded service is a child process, and ``vgn-client``'s
-#: ``clear-scene/generate-data --sim`` and ``clean-data`` hand their arguments to the package that
-#: owns the command, loaded only when the user runs it. A new entry here is a new runtime
-#: dependency of that file: add it on purpose, not to make the test pass.
+#: and the embedded service start the server with uvicorn (``serve`` itself is handed to the launch
+#: package), and ``vgn-client``'s ``clear-scene/generate-data --sim`` and ``clean-data`` hand their
+#: arguments to the package that owns the command, loaded only when the user runs it. A new entry
+#: here is a new runtime dependency of that file: add it on purpose, not to make the test pass.
 RUNTIME_DISPATCH: frozenset[tuple[str, str]] = frozenset(
     {
-        ("client/cli.py", "service.app:app"),
+        ("client/cli.py", "service.launch.serve"),
         ("client/cli.py", "sim_worker.clear_scene"),
         ("client/cli.py", "sim_worker.generate_data"),
         ("client/cli.py", "vgn_data.clean_data"),
-        ("client/embedded.py", "service.app:app"),
+        ("service/launch/embedded.py", "service.app:app"),
+        ("service/launch/serve.py", "service.app:app"),
+    }
+)
+
+#: The old ``client`` modules of process management, which moved to ``service.launch``: each
+#: forwards its names there for one release, loading the module on first use (importlib; the
+#: import for type checkers never runs), so importing ``client`` loads nothing of the server's
+#: package. Goes with those modules.
+FORWARDS: frozenset[tuple[str, str]] = frozenset(
+    {
+        ("client/embedded.py", "service.launch.embedded"),
+        ("client/fleet.py", "service.launch.fleet"),
+        ("client/haproxy.py", "service.launch.haproxy"),
+        ("client/lifetime.py", "service.launch.lifetime"),
     }
 )
 
@@ -128,20 +152,39 @@ def references(root: Path, path: Path) -> Iterator[Reference]:
             yield Reference(rel, node.lineno, node.value, "string")
 
 
+def within(module: str, package: str) -> bool:
+    """Whether ``module`` is ``package`` or one of its modules (``a.b`` is within ``a``, ``ab`` is not)."""
+    return module == package or module.startswith(package + ".")
+
+
+def owner(module: str, rules: Mapping[str, frozenset[str]]) -> str | None:
+    """The most specific package of ``rules`` that ``module`` belongs to."""
+    packages = [package for package in rules if within(module, package)]
+    return max(packages, key=len) if packages else None
+
+
 def violations(
     root: Path,
     rules: Mapping[str, frozenset[str]] = RULES,
     dispatch: frozenset[tuple[str, str]] = RUNTIME_DISPATCH,
+    forwards: frozenset[tuple[str, str]] = FORWARDS,
 ) -> list[str]:
     """One line per reference that runs against ``rules``: ``file:line: message``."""
+    ours = {package.split(".")[0] for package in rules}
     found = []
     for package, allowed in rules.items():
-        for path in sorted((root / package).rglob("*.py")):
+        for path in sorted((root / package.replace(".", "/")).rglob("*.py")):
+            if owner(module_name(root, path), rules) != package:
+                continue  # a subpackage with a rule of its own
             for ref in references(root, path):
-                target = ref.module.split(":")[0].split(".")[0]
-                if target == package or target not in rules or target in allowed:
+                target = ref.module.split(":")[0]
+                if target.split(".")[0] not in ours or within(target, package):
+                    continue
+                if any(within(target, other) for other in allowed):
                     continue
                 if ref.how == "string" and (ref.path, ref.module) in dispatch:
+                    continue
+                if ref.how != "string" and (ref.path, ref.module) in forwards:
                     continue
                 others = ", ".join(sorted(allowed)) or "none of the other packages"
                 found.append(
@@ -200,7 +243,8 @@ def test_every_package_has_a_rule():
 
 def test_every_rule_names_a_package_with_modules():
     for package in RULES:
-        assert list((ROOT / package).rglob("*.py")), f"{package}/ has no modules: is RULES out of date?"
+        folder = package.replace(".", "/")
+        assert list((ROOT / folder).rglob("*.py")), f"{folder}/ has no modules: is RULES out of date?"
 
 
 def test_imports_run_the_allowed_way():
@@ -223,7 +267,7 @@ def test_no_benchmark_imports_one_that_imports_it_back():
 
 def test_runtime_dispatch_targets_exist():
     """A stale entry would allow a string that no longer names anything."""
-    for path, module in RUNTIME_DISPATCH:
+    for path, module in RUNTIME_DISPATCH | FORWARDS:
         assert (ROOT / path).is_file(), path
         assert _names_module(ROOT, module), module
 
@@ -296,6 +340,35 @@ def test_checker_ignores_docstrings_and_resolves_relative_imports(tmp_path):
     assert violations(root, TOY_RULES, frozenset()) == []
     assert absolute(None, 1, "client.grpc_api", True) == "client.grpc_api"
     assert absolute("schemas", 2, "client.grpc_api.convert", False) == "client.schemas"
+
+
+def test_checker_applies_a_subpackage_rule(tmp_path):
+    rules = {
+        **TOY_RULES,
+        "service.launch": frozenset({"client"}),
+        "sim_worker": frozenset({"service.launch"}),
+    }
+    files = {
+        "service/launch/__init__.py": "",
+        "service/launch/run.py": "from client.schemas import X\nfrom service.app import X as Y\n",
+        "service/core.py": "from service.launch.run import X\n",
+        "sim_worker/world.py": "from service.launch import run\nimport service.app\n",
+    }
+    assert (
+        owner("service.launch.run", rules) == "service.launch" and owner("service.core", rules) == "service"
+    )
+    assert sorted(violations(_toy(tmp_path, files), rules, frozenset(), frozenset())) == [
+        "service/launch/run.py:2: service.launch must not import 'service.app' (service.launch may use: client)",
+        "sim_worker/world.py:2: sim_worker must not import 'service.app' (sim_worker may use: service.launch)",
+    ]
+
+
+def test_checker_allows_a_declared_forward(tmp_path):
+    code = 'import importlib\n\nrun = importlib.import_module("service.app")\n'
+    root = _toy(tmp_path, {"client/old.py": code})
+    (found,) = violations(root, TOY_RULES, frozenset(), frozenset())
+    assert found.startswith("client/old.py:3: client must not load (importlib) 'service.app'")
+    assert violations(root, TOY_RULES, frozenset(), frozenset({("client/old.py", "service.app")})) == []
 
 
 def test_checker_ignores_imports_of_other_libraries(tmp_path):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from client.embedded import EmbeddedService
+from service.launch.embedded import EmbeddedService
 
 ROOT = Path(__file__).resolve().parent.parent
 GRPC_PAGE = ROOT / "docs" / "grpc-api.md"

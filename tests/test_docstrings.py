@@ -104,7 +104,15 @@ def problems(path: Path) -> list[str]:
 
 
 def test_the_shipped_packages_are_found() -> None:
-    assert shipped_packages() == ["client", "ros_bridge", "service", "sim_worker", "training", "vgn_data"]
+    assert shipped_packages() == [
+        "client",
+        "ros_bridge",
+        "service",
+        "sim_worker",
+        "training",
+        "vgn_contract",
+        "vgn_data",
+    ]
     assert len(source_files()) > 50
 
 

@@ -1,4 +1,4 @@
-"""The hand is written down once: in its gripper description (client/grippers/*.json).
+"""The hand is written down once: in its gripper description (vgn_contract/grippers/*.json).
 
 A hand constant typed into a module (``MAX_OPENING = 0.08``) silently disagrees with the
 description the day someone plans for another hand, so this test reads the shipped packages'
@@ -14,9 +14,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = ("client", "service", "sim_worker", "training", "vgn_data")
+SHIPPED = ("vgn_contract", "client", "service", "sim_worker", "training", "vgn_data")
 #: The module that reads descriptions: the one place their fields are named and checked.
-READER = "client/gripper_description.py"
+READER = "vgn_contract/gripper_description.py"
 #: Names that are a hand's constant whatever their value.
 HAND_NAMES = frozenset({"MAX_OPENING", "FINGER_DEPTH", "PREGRASP_DISTANCE"})
 #: A name about a hand's geometry; with one of the franka hand's own numbers it is a copy of the description.

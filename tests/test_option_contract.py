@@ -1,4 +1,4 @@
-"""Every grasp query option is one declaration (``client.schemas.GraspQuery``) that each way of asking
+"""Every grasp query option is one declaration (``vgn_contract.schemas.GraspQuery``) that each way of asking
 carries: the gRPC message, the command line's ``grasps`` and ``view``, and, for the switches the
 operator sets defaults for, the service's settings, ``clear-scene`` and the benchmark."""
 
@@ -8,9 +8,9 @@ import argparse
 
 from benchmarks import clutter
 from client.cli import build_parser
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.schemas import SWITCHES, GraspDefaults, GraspQuery, GraspResult
 from service.settings import Settings
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.schemas import SWITCHES, GraspDefaults, GraspQuery, GraspResult
 
 #: gRPC fields that are not query options: which session the query is about.
 ADDRESSING = {"session_id"}

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client.embedded import EmbeddedService
+from service.launch.embedded import EmbeddedService
 
 ROOT = Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"

@@ -41,8 +41,8 @@ def executed_grasp_success(weights: Path, config: EvaluationConfig, results: Pat
     threshold and return the summary (success rate and cleared with 95 % intervals, outcome
     breakdown) with the settings. ``results`` keeps the rounds, so a rerun resumes."""
     try:
-        from client.embedded import EmbeddedService
         from client.http import VGNClient
+        from service.launch.embedded import EmbeddedService
         from sim_worker.clear_scene import resolve_planner, run_episode
         from sim_worker.clutter import ClutterConfig
         from sim_worker.results import ResultsFolder

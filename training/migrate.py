@@ -63,7 +63,7 @@ _table = None
 
 def _start_worker(job: MigrationJob) -> None:
     global _builder, _table
-    from client.lifetime import end_with_parent
+    from service.launch.lifetime import end_with_parent
     from sim_worker.datagen import DataGenConfig, SceneBuilder
     from sim_worker.recipes import ObjectTable, object_roots
 

@@ -219,7 +219,7 @@ _renderer: ObservationRenderer | None = None
 
 def _start_worker(settings: ObservationSettings, vgn_objects: str | None) -> None:
     global _renderer
-    from client.lifetime import end_with_parent
+    from service.launch.lifetime import end_with_parent
 
     end_with_parent()
     _renderer = ObservationRenderer(settings, vgn_objects)

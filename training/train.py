@@ -24,7 +24,6 @@ from typing import Any
 import torch
 from tqdm import tqdm
 
-from client.schemas import VGN_DEFAULT_THRESHOLD
 from service.planner import resolve_device
 from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vgn, weights_id
 from service.vgn.network import VGN
@@ -59,6 +58,7 @@ from training.observations import ObservationSettings
 from training.options import option
 from training.recipe_shards import RecipeFolder
 from training.shards import ShardFolder, manifest_summary
+from vgn_contract.schemas import VGN_DEFAULT_THRESHOLD
 from vgn_data.files import remove_stale_temporaries
 
 #: What a teacher may see of a scene (``TrainConfig.teacher_views``).

@@ -24,9 +24,9 @@ from typing import TextIO
 
 import numpy as np
 
-from client.geometry import invert, matrix_from_pose, pose_from_matrix
-from client.gripper_description import default_gripper
-from client.schemas import Intrinsics
+from vgn_contract.geometry import invert, matrix_from_pose, pose_from_matrix
+from vgn_contract.gripper_description import default_gripper
+from vgn_contract.schemas import Intrinsics
 from vgn_data.files import atomic_writer, crash_now, crash_point, write_atomically
 
 GRASP_COLUMNS = ["scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "label"]

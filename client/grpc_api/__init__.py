@@ -1,6 +1,1 @@
-"""Python stubs of ``proto/vgn/v1/grasp_planning.proto`` (generated, checked in) and the
-conversions between them and the wire schemas of ``client.schemas``.
-
-Importing the stubs needs the ``grpc`` extra (grpcio, protobuf); the HTTP client does not.
-Regenerate after editing the ``.proto``: ``python -m client.grpc_api.generate``.
-"""
+"""Moved to ``vgn_contract.grpc_api``; its modules are re-exported here for one release."""

@@ -14,7 +14,11 @@ from pydantic import ValidationError
 from starlette.datastructures import FormData, UploadFile
 from starlette.formparsers import MultiPartException
 
-from client.schemas import (
+from service.api.errors import validation_response
+from service.api.metrics import ServiceMetrics
+from service.core import PlanningService
+from service.errors import InvalidInput, UnsupportedMediaType
+from vgn_contract.schemas import (
     SESSION_ID_PATTERN,
     ErrorResponse,
     FrameMeta,
@@ -29,11 +33,7 @@ from client.schemas import (
     SessionInfo,
     SessionList,
 )
-from client.snapshot import MEDIA_TYPE as SNAPSHOT_MEDIA_TYPE
-from service.api.errors import validation_response
-from service.api.metrics import ServiceMetrics
-from service.core import PlanningService
-from service.errors import InvalidInput, UnsupportedMediaType
+from vgn_contract.snapshot import MEDIA_TYPE as SNAPSHOT_MEDIA_TYPE
 
 NPY_MEDIA_TYPE = "application/x-npy"
 #: A frame may also be sent as the bare depth image, its meta JSON in this header.

@@ -18,8 +18,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from client.gripper_description import GripperDescription, default_gripper
-from client.schemas import Grasp
+from vgn_contract.gripper_description import GripperDescription, default_gripper
+from vgn_contract.schemas import Grasp
 
 # The steps, per seed:
 # 1. ``seeds`` surface points whose normal is not pointing down (n_z > -0.1) are drawn with a

@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 import grpc
 from pydantic import ValidationError
 
-from client.grpc_api import grasp_planning_pb2 as pb
 from service.api.errors import STATUS_OF, field_errors
 from service.errors import (
     CapacityExceeded,
@@ -31,6 +30,7 @@ from service.errors import (
 from service.grpc.handlers import MalformedRequest
 from service.settings import Settings
 from service.vgn.checkpoint import CheckpointError
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
 
 if TYPE_CHECKING:
     from service.api.metrics import ServiceMetrics

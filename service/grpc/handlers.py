@@ -16,7 +16,7 @@ from typing import Any
 import grpc
 from google.protobuf.message import DecodeError
 
-from client.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
 
 SERVICE = pb.DESCRIPTOR.services_by_name["GraspPlanning"]
 

@@ -9,16 +9,16 @@ from dataclasses import dataclass
 import grpc
 from pydantic import ValidationError
 
-from client.grpc_api import convert
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningServicer
-from client.schemas import FrameMeta, FrameResult, GraspQuery, SessionCreate
-from client.tracking import DEFAULT_MAX_ANGLE_DEG, DEFAULT_MAX_DISTANCE, GraspTracker
 from service.api.metrics import ServiceMetrics
 from service.core import PlanningService
 from service.errors import InvalidInput, ServiceError, UnsupportedMediaType
 from service.grpc.errors import PayloadTooLarge, rpc, streaming_rpc, validation_message
 from service.grpc.handlers import MalformedRequest
+from vgn_contract.grpc_api import convert
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningServicer
+from vgn_contract.schemas import FrameMeta, FrameResult, GraspQuery, SessionCreate
+from vgn_contract.tracking import DEFAULT_MAX_ANGLE_DEG, DEFAULT_MAX_DISTANCE, GraspTracker
 
 
 def check_one_session(index: int, session_id: str, named: str) -> None:

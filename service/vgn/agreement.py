@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp
+from vgn_contract.schemas import Grasp
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp
+from vgn_contract.schemas import Grasp
 
 #: Grid values strictly between these are observed voxels behind (inside) the surface.
 _INSIDE_LOW, _SURFACE = 1e-3, 0.5

@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from client.geometry import gripper_outline, matrix_from_pose
-from client.schemas import Grasp, GraspQuery, GraspResult, SessionInfo
+from vgn_contract.geometry import gripper_outline, matrix_from_pose
+from vgn_contract.schemas import Grasp, GraspQuery, GraspResult, SessionInfo
 
 #: The browser stays responsive up to a few tens of thousands of markers.
 DEFAULT_MAX_POINTS = 30000

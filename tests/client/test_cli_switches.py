@@ -11,8 +11,8 @@ from typing import Any
 import pytest
 
 from client import cli
-from client.grpc_api import convert
-from client.schemas import GraspQuery, GraspResult
+from vgn_contract.grpc_api import convert
+from vgn_contract.schemas import GraspQuery, GraspResult
 
 #: (flags, the query options they make)
 CASES = [

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from client import AsyncVGNClient, Intrinsics, NotFound, Workspace
-from client.geometry import matrix_from_pose
-from client.schemas import Pose
 from service.tsdf import SceneVolume
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.geometry import matrix_from_pose
+from vgn_contract.schemas import Pose
 
 SCENE = BoxScene()
 

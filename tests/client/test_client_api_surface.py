@@ -16,7 +16,7 @@ import pytest
 
 import client
 from client import AsyncVGNClient, BadRequest, InvalidRequest, VGNClient, VGNError
-from client.embedded import EmbeddedService
+from service.launch.embedded import EmbeddedService
 from tests.helpers.scenes import INTRINSICS
 
 REPO = Path(__file__).resolve().parents[2]

@@ -1,5 +1,5 @@
 """The gRPC client names every call's session in the ``x-session-id`` metadata, the key the fleet's
-HAProxy hashes on (``client.haproxy``): checked on a real gRPC server on loopback that records what
+HAProxy hashes on (``service.launch.haproxy``): checked on a real gRPC server on loopback that records what
 each call carried, where the end-to-end fleet test needs HAProxy."""
 
 from __future__ import annotations

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from client.grpc_api import convert
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.schemas import GraspDefaults, GraspResult, ModelInfo, RuntimeInfo
+from vgn_contract.grpc_api import convert
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.schemas import GraspDefaults, GraspResult, ModelInfo, RuntimeInfo
 
 DEFAULTS = GraspDefaults(turn_average=True, clearance=True, grip=False, threshold=0.8, antipodal_threshold=0.5,
                          fallback_threshold=0.5)  # fmt: skip

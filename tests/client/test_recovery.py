@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from client import AsyncVGNClient, GRPCClient, NotFound, VGNClient
-from client.embedded import EmbeddedService
 from client.recovery import Replay, is_lost
+from service.launch.embedded import EmbeddedService
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 
 VIEWS = circle_views(3)

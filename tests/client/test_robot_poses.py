@@ -10,8 +10,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from client import Grasp, Pose
-from client.geometry import invert, matrix_from_pose
-from client.gripper_description import builtin_gripper, default_gripper
 from client.robot import (
     HALF_TURN,
     nearest_turn,
@@ -20,6 +18,8 @@ from client.robot import (
     tool_offset,
     tool_pose,
 )
+from vgn_contract.geometry import invert, matrix_from_pose
+from vgn_contract.gripper_description import builtin_gripper, default_gripper
 
 #: The Franka hand's TCP (fingertip centre) from its flange, turned -45° about z (Franka's docs).
 FLANGE_TO_TCP = 0.1034

@@ -14,7 +14,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from client.embedded import EmbeddedService, free_port
+from service.launch.embedded import EmbeddedService, free_port
 
 REPO = Path(__file__).resolve().parents[2]
 

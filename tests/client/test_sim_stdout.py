@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[2]
 WORLD_LIFE = textwrap.dedent("""
     import json, sys
     import numpy as np
-    from client.schemas import Intrinsics
+    from vgn_contract.schemas import Intrinsics
     from sim_worker.camera import Camera, six_views
     from sim_worker.world import World
 

@@ -7,8 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from client.embedded import EmbeddedService
 from client.http import VGNClient
+from service.launch.embedded import EmbeddedService
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 
 

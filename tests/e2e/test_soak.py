@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client.embedded import EmbeddedService
 from client.http import NotFound, VGNClient
-from client.schemas import Intrinsics
+from service.launch.embedded import EmbeddedService
 from tests.helpers.scenes import BoxScene, circle_views
+from vgn_contract.schemas import Intrinsics
 
 MAX_SESSIONS = 16
 TTL_S = 1.0

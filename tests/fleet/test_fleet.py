@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 
 from client import GRPCClient, VGNClient
-from client.embedded import free_port
-from client.fleet import Fleet, FleetConfig
 from client.http import encode_depth
 from client.recovery import Replay
-from client.schemas import FrameMeta, GraspQuery, Pose, SessionCreate
 from service.core import PlanningService
+from service.launch.embedded import free_port
+from service.launch.fleet import Fleet, FleetConfig
 from service.settings import Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.schemas import FrameMeta, GraspQuery, Pose, SessionCreate
 
 if shutil.which("haproxy") is None and not os.environ.get("CI"):
     pytest.skip(

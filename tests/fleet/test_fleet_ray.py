@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from client.embedded import free_port
-from client.fleet import Fleet, FleetConfig
+from service.launch.embedded import free_port
+from service.launch.fleet import Fleet, FleetConfig
 from tests.helpers.runs import assert_same_results
 
 pytest.importorskip("ray")

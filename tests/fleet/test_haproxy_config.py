@@ -1,4 +1,4 @@
-"""The proxy's configuration: the files in deploy/ are what ``client.haproxy`` renders for them,
+"""The proxy's configuration: the files in deploy/ are what ``service.launch.haproxy`` renders for them,
 HAProxy accepts every configuration the project renders, and both backends share one ring."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from client.haproxy import ProxyConfig, main, numbered, render
+from service.launch.haproxy import ProxyConfig, main, numbered, render
 
 DEPLOY = Path(__file__).resolve().parents[2] / "deploy"
 COMPOSE = ProxyConfig(numbered(2, "replica-{i}"), bind="0.0.0.0", resolvers=True)
@@ -32,7 +32,7 @@ def kubernetes_documents() -> dict[str, dict]:
 
 def test_the_deploy_files_are_rendered_from_the_module():
     assert (DEPLOY / "haproxy.cfg").read_text() == render(COMPOSE), (
-        "regenerate: python -m client.haproxy --replicas 2 --server 'replica-{i}' --resolvers > deploy/haproxy.cfg"
+        "regenerate: python -m service.launch.haproxy --replicas 2 --server 'replica-{i}' --resolvers > deploy/haproxy.cfg"
     )
     documents = kubernetes_documents()
     assert documents["ConfigMap/vgn-haproxy"]["data"]["haproxy.cfg"] == render(KUBERNETES)

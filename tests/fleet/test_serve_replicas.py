@@ -15,7 +15,7 @@ import httpx
 import pytest
 
 from client import GRPCClient, VGNClient
-from client.embedded import free_port
+from service.launch.embedded import free_port
 from tests.helpers.processes import alive, wait_until_gone
 
 if shutil.which("haproxy") is None and not os.environ.get("CI"):

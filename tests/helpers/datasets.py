@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Intrinsics
 from tests.helpers.scenes import TABLE_Z, BoxScene, circle_views
+from vgn_contract.schemas import Intrinsics
 from vgn_data.dataset import DatasetSetup, RawDataset, SceneViews
 
 N = 40

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from client.geometry import look_at
-from client.schemas import Intrinsics
+from vgn_contract.geometry import look_at
+from vgn_contract.schemas import Intrinsics
 
 INTRINSICS = Intrinsics(width=640, height=480, fx=540.0, fy=540.0, cx=319.5, cy=239.5)
 TABLE_Z = 0.05

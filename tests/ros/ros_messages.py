@@ -8,7 +8,7 @@ from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Header
 
-from client.schemas import Intrinsics, Pose
+from vgn_contract.schemas import Intrinsics, Pose
 
 
 def stamp(seconds: float) -> Time:

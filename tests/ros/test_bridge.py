@@ -20,7 +20,7 @@ from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Float32MultiArray  # noqa: E402
 
 from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
-from client.embedded import EmbeddedService, free_port  # noqa: E402
+from service.launch.embedded import EmbeddedService, free_port  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
 from tests.ros.graph import LATCHED, RELIABLE, Bridge, Graph, private_domain  # noqa: E402
 

@@ -13,7 +13,6 @@ pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install
 from geometry_msgs.msg import TransformStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from client.schemas import Grasp, Intrinsics  # noqa: E402
 from ros_bridge import outputs  # noqa: E402
 from ros_bridge.assemble import Frame, FrameAssembler  # noqa: E402
 from ros_bridge.convert import camera_pose, depth_array, fixed_pose, intrinsics, seconds  # noqa: E402
@@ -21,6 +20,7 @@ from ros_bridge.poses import FixedPose, TopicPoses  # noqa: E402
 from ros_bridge.problems import Complaints, Refused, Waiting  # noqa: E402
 from ros_bridge.settings import PARAMETERS, settings_from  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
+from vgn_contract.schemas import Grasp, Intrinsics  # noqa: E402
 
 CAMERA = Intrinsics(width=4, height=3, fx=5.0, fy=5.0, cx=2.0, cy=1.5)
 

@@ -12,9 +12,9 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
 
-from client.schemas import GraspResult, Intrinsics, Pose  # noqa: E402
 from ros_bridge.assemble import Frame  # noqa: E402
 from ros_bridge.stream import Ended, TrackStream, Update  # noqa: E402
+from vgn_contract.schemas import GraspResult, Intrinsics, Pose  # noqa: E402
 
 CAMERA = Intrinsics(width=4, height=3, fx=5.0, fy=5.0, cx=2.0, cy=1.5)
 OTHER_CAMERA = Intrinsics(width=4, height=3, fx=6.0, fy=6.0, cx=2.0, cy=1.5)

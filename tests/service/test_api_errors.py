@@ -24,10 +24,10 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 
-from client.embedded import EmbeddedService
 from client.http import VGNClient
 from service.core import PlanningService
 from service.http_app import MULTIPART_OVERHEAD, create_app
+from service.launch.embedded import EmbeddedService
 from service.settings import Settings
 from tests.helpers.frames import (
     DEPTH,

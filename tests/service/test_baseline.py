@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from client.gripper_description import default_gripper
-from client.schemas import GraspQuery, SessionCreate
 from service.baseline import AntipodalConfig, plan_antipodal
 from service.core import PlanningService
 from service.http_app import create_app
 from service.settings import Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+from vgn_contract.gripper_description import default_gripper
+from vgn_contract.schemas import GraspQuery, SessionCreate
 
 SCENE = BoxScene()  # 0.08 (x) x 0.06 (y) x 0.06 (z) on the table
 FINGER_DEPTH = default_gripper().finger_depth

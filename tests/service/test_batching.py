@@ -13,8 +13,8 @@ import pytest
 import torch
 
 from client.connect import connect
-from client.embedded import EmbeddedService
 from client.http import VGNClient
+from service.launch.embedded import EmbeddedService
 from service.planner import GraspPlanner, InferenceOptions, resolve_heads
 from service.settings import PACKAGED_MODEL
 from service.vgn.batching import MicroBatcher

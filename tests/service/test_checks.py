@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp, GraspQuery, SessionCreate
 from service.checks import SUPPORT_CONTACT_TOLERANCE, check_grasps, contact_tolerances
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
@@ -18,6 +17,7 @@ from service.grip import GripConfig, gripping_grasps, support_height
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
+from vgn_contract.schemas import Grasp, GraspQuery, SessionCreate
 
 #: A vertical wall 3 cm thick through the middle of the grid, its faces turned 40 degrees about z
 #: from facing ±y: fingers closing along y meet it at 40 degrees, too slanted for :data:`STRICT`.

@@ -13,12 +13,7 @@ import pytest
 from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
-from client.gripper_description import default_gripper
-from client.grpc_api import convert
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
-from client.schemas import GraspQuery, GraspResult, SessionCreate
 from service.clearance import (
     ClearanceConfig,
     approach_is_clear,
@@ -30,6 +25,11 @@ from service.grpc.server import build_server
 from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.gripper_description import default_gripper
+from vgn_contract.grpc_api import convert
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
+from vgn_contract.schemas import GraspQuery, GraspResult, SessionCreate
 
 ROOT = Path(__file__).resolve().parents[2]
 URDF = ROOT / "sim_worker" / "assets" / "gripper.urdf"

@@ -12,13 +12,13 @@ from fastapi.testclient import TestClient
 from scipy.spatial import cKDTree
 
 from client.http import VGNClient
-from client.schemas import SessionCreate
 from service.cloud_fusion import CloudFusion
 from service.core import PlanningService
 from service.http_app import create_app
 from service.settings import Settings
 from service.tsdf import SceneVolume, TSDFVolume, compact_depth
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.schemas import SessionCreate
 
 SCENE = BoxScene()
 VOXEL = 0.3 / 120

@@ -11,15 +11,15 @@ import grpc
 import httpx
 import pytest
 
-from client.embedded import EmbeddedService
-from client.grpc_api import convert
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
 from client.http import VGNClient
-from client.schemas import GraspDefaults, GraspResult
+from service.launch.embedded import EmbeddedService
 from service.settings import PACKAGED_MODEL
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.grpc_api import convert
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
+from vgn_contract.schemas import GraspDefaults, GraspResult
 
 SCENE = BoxScene()
 SWITCHES = ("VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP")

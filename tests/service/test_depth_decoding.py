@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from client.schemas import Intrinsics
 from service.depth import RAW_MEDIA_TYPE, decode_depth
 from service.errors import InvalidInput
 from service.tsdf import compact_depth
+from vgn_contract.schemas import Intrinsics
 
 INTRINSICS = Intrinsics(width=4, height=3, fx=5.0, fy=5.0, cx=2.0, cy=1.5)
 EDGES = [0.0, 0.5, 1.999, 65504.0, 65520.0, 1e30, np.inf, -np.inf, np.nan, 3e-8, -0.0, 2.0]

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.geometry import matrix_from_pose
 from service.vgn.detection import DetectionConfig, detect_grasps
+from vgn_contract.geometry import matrix_from_pose
 
 N, VOXEL = 40, 0.3 / 40
 SHARP = DetectionConfig(smoothing_sigma=0.0)  # no smoothing: peaks stay where they are put

@@ -8,7 +8,6 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp, GraspQuery
 from service.planner import GraspPlanner, InferenceOptions, native_bf16
 from service.settings import PACKAGED_MODEL
 from service.vgn.agreement import Tolerance, disagreements, network_outputs, voxelwise_disagreements
@@ -24,6 +23,7 @@ from service.vgn.fast import (
 from service.vgn.network import VGN
 from service.vgn.outputs import ComputedHeads, HeadsOnDemand
 from tests.helpers.grids import recorded_grids
+from vgn_contract.schemas import Grasp, GraspQuery
 
 VOXEL = 0.3 / 40
 #: Low enough that the recorded scenes offer most of their grasps (after non-maximum suppression a

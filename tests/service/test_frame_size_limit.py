@@ -14,9 +14,9 @@ import httpx
 import numpy as np
 import pytest
 
-from client.embedded import EmbeddedService
 from client.http import FRAME_META_HEADER
 from service.api.limits import MULTIPART_OVERHEAD
+from service.launch.embedded import EmbeddedService
 from service.settings import Settings
 
 #: The documented default (README, settings): 32 MiB.

@@ -10,9 +10,7 @@ import pytest
 from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
-from client.grpc_api import convert
 from client.grpc_client import GRPCClient
-from client.schemas import Grasp, GraspQuery, GraspResult, SessionCreate
 from service.core import PlanningService
 from service.grip import GripConfig, GripMeasure, gripping_grasps, measure_grip, support_height
 from service.grpc.server import build_server
@@ -20,6 +18,8 @@ from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from service.tsdf import TSDFVolume
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+from vgn_contract.grpc_api import convert
+from vgn_contract.schemas import Grasp, GraspQuery, GraspResult, SessionCreate
 
 N, SIZE = 40, 0.3
 VOXEL = SIZE / N

@@ -14,11 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from client import BadRequest
-from client.gripper_description import BUILTIN_DIR, GripperDescription, parse_gripper
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient
-from client.schemas import GraspResult, GripperList, SessionCreate, SessionInfo
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grpc.server import build_server
@@ -26,6 +22,10 @@ from service.hands import Hands
 from service.http_app import create_app
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.gripper_description import BUILTIN_DIR, GripperDescription, parse_gripper
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
+from vgn_contract.schemas import GraspResult, GripperList, SessionCreate, SessionInfo
 
 FRANKA = json.loads((BUILTIN_DIR / "franka.json").read_text())
 

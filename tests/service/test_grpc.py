@@ -19,17 +19,17 @@ from grpc_reflection.v1alpha.proto_reflection_descriptor_database import ProtoRe
 
 from client import BadRequest, Conflict, NotFound, PayloadTooLarge, ServiceUnavailable, Unauthorized
 from client.connect import connect
-from client.embedded import EmbeddedService
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient, frame_message
 from client.http import VGNClient
 from service.core import PlanningService
 from service.grpc.server import SERVICE_NAME, GRPCPortError, build_server
 from service.http_app import create_app
+from service.launch.embedded import EmbeddedService
 from service.settings import Settings
 from service.tsdf import SceneVolume
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 
 SCENE = BoxScene()
 LIMIT = 4 * 1024 * 1024

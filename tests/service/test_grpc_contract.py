@@ -23,11 +23,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from service.core import PlanningService
 from service.grpc.server import build_server
 from service.settings import Settings
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 
 LIMIT = 256 * 1024
 WIDTH, HEIGHT = 64, 48

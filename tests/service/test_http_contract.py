@@ -35,10 +35,10 @@ from schemathesis.checks import (
 )
 from schemathesis.openapi.checks import RejectedPositiveData
 
-from client import snapshot
-from client.embedded import EmbeddedService
-from client.schemas import Workspace
+from service.launch.embedded import EmbeddedService
 from service.snapshot import Snapshot, encode
+from vgn_contract import snapshot
+from vgn_contract.schemas import Workspace
 
 SEED = 20261123
 SHORT_EXAMPLES = 8

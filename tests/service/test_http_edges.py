@@ -21,7 +21,6 @@ import httpx
 import numpy as np
 import pytest
 
-from client.embedded import EmbeddedService
 from client.http import (
     BadRequest,
     Conflict,
@@ -33,8 +32,9 @@ from client.http import (
     VGNError,
     raise_for_error,
 )
-from client.schemas import Intrinsics
+from service.launch.embedded import EmbeddedService
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.schemas import Intrinsics
 
 KEY = "s3cret-key"
 TTL_S = 1.0

@@ -41,7 +41,7 @@ def probe(*modules: str) -> dict:
     """Import ``modules`` in a fresh interpreter that was asked to end with this process, with
     none of the variables the server would set."""
     env = {name: value for name, value in os.environ.items() if name not in ("OMP_WAIT_POLICY",)}
-    env["VGN_END_WITH_PARENT"] = str(os.getpid())  # as client.embedded asks its child
+    env["VGN_END_WITH_PARENT"] = str(os.getpid())  # as service.launch.embedded asks its child
     done = subprocess.run(
         [sys.executable, "-c", PROBE, *modules],
         cwd=ROOT,

@@ -13,9 +13,9 @@ from urllib.parse import urljoin, urlsplit
 import httpx
 import pytest
 
-from client.embedded import EmbeddedService
 from service.api import docs
 from service.http_app import create_app
+from service.launch.embedded import EmbeddedService
 from service.settings import Settings
 from tests.helpers.browser import headless_chromium
 

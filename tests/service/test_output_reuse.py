@@ -3,9 +3,9 @@ output: same grasps, no forward pass; any frame or reset makes the next request 
 
 from __future__ import annotations
 
-from client.schemas import GraspQuery, SessionCreate
 from service.core import PlanningService
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.schemas import GraspQuery, SessionCreate
 
 
 def forwards(core: PlanningService) -> int:

@@ -7,7 +7,7 @@ import platform
 
 import httpx
 
-from client.embedded import EmbeddedService
+from service.launch.embedded import EmbeddedService
 from service.runtime import (
     MALLOC_SETTINGS,
     MALLOC_VARIABLES,

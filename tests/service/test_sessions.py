@@ -7,10 +7,10 @@ import threading
 import numpy as np
 import pytest
 
-from client.schemas import SessionCreate
 from service.errors import CapacityExceeded, SessionExists, SessionNotFound
 from service.sessions import SessionStore
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.schemas import SessionCreate
 
 
 class Clock:

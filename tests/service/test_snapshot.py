@@ -9,8 +9,8 @@ import json
 import numpy as np
 import pytest
 
-from client import snapshot as fmt
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract import snapshot as fmt
 
 SCENE = BoxScene()
 NPZ = {"Content-Type": fmt.MEDIA_TYPE}

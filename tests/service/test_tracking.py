@@ -13,15 +13,15 @@ import pytest
 from scipy.spatial import cKDTree
 
 from client import BadRequest
-from client.embedded import EmbeddedService
-from client.grpc_api import grasp_planning_pb2 as pb
-from client.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
 from client.grpc_client import GRPCClient, frame_message
 from client.http import VGNClient
-from client.schemas import Grasp
-from client.tracking import GraspTracker, grasp_angle
+from service.launch.embedded import EmbeddedService
 from service.tsdf import SceneVolume
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+from vgn_contract.grpc_api import grasp_planning_pb2 as pb
+from vgn_contract.grpc_api.grasp_planning_pb2_grpc import GraspPlanningStub
+from vgn_contract.schemas import Grasp
+from vgn_contract.tracking import GraspTracker, grasp_angle
 
 POSES = circle_views(6)
 BOX = BoxScene()

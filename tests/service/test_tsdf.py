@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from client.geometry import matrix_from_pose
 from service.tsdf import SceneVolume, TSDFVolume
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+from vgn_contract.geometry import matrix_from_pose
 
 SCENE = BoxScene()
 
@@ -23,7 +23,7 @@ def fused(workspace_pose: np.ndarray | None = None, views: int = 6, resolution: 
 
 def test_analytic_depth_matches_geometry():
     """Guard for the test scene itself: the centre ray of a top-down camera hits the box top."""
-    from client.geometry import look_at
+    from vgn_contract.geometry import look_at
 
     pose = look_at([0.15, 0.15, 0.6], [0.15, 0.15, 0.0], up=[0, 1, 0])
     depth = SCENE.depth(pose)
@@ -113,7 +113,7 @@ def test_invalid_depth_is_ignored():
 
 
 def test_frame_size_can_change_between_frames():
-    from client.schemas import Intrinsics
+    from vgn_contract.schemas import Intrinsics
 
     small = Intrinsics(width=320, height=240, fx=270.0, fy=270.0, cx=159.75, cy=119.75)
     volume = SceneVolume(0.3, 40, np.eye(4), cloud_resolution=120)

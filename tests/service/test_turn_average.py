@@ -13,7 +13,6 @@ import pytest
 import torch
 
 from client.grpc_client import GRPCClient
-from client.schemas import GraspQuery, GraspResult, SessionCreate
 from service.core import PlanningService
 from service.grpc.server import build_server
 from service.planner import GraspPlanner, InferenceOptions
@@ -33,6 +32,7 @@ from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 from training.augment import rotate_z
 from training.labels import LabelSet
 from training.quaternions import about_z, flipped, multiply
+from vgn_contract.schemas import GraspQuery, GraspResult, SessionCreate
 
 N = 8
 

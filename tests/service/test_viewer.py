@@ -14,14 +14,14 @@ import pytest
 from fastapi.testclient import TestClient
 from PIL import Image
 
-from client.gripper_description import default_gripper
-from client.schemas import Grasp
 from service.core import PlanningService
 from service.http_app import create_app
 from service.settings import Settings
 from service.viewer.scene import grasp_outline, tilt_degrees
 from tests.helpers.browser import headless_chromium
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from vgn_contract.gripper_description import default_gripper
+from vgn_contract.schemas import Grasp
 
 SCENE = BoxScene()
 #: Without the clearance check: it drops every grasp of the random weights on this scene.

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client.schemas import GraspDefaults, GraspResult, ModelInfo
 from sim_worker.camera import WORKSPACE_CENTRE
 from sim_worker.clutter import camera_views
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 from tests.helpers.runs import check_results, clear_scene, read_csv
+from vgn_contract.schemas import GraspDefaults, GraspResult, ModelInfo
 
 VGN_COLUMNS = ["round_id", "scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "score", "label",
                "integration_time", "planning_time"]  # fmt: skip

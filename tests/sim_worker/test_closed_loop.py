@@ -10,9 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client.embedded import EmbeddedService
 from client.http import VGNClient
-from client.tracking import GraspTracker
+from service.launch.embedded import EmbeddedService
 from sim_worker.camera import SIM_INTRINSICS, WORKSPACE_CENTRE, Camera, six_views
 from sim_worker.closed_loop import (
     STABLE_PLANS,
@@ -29,6 +28,7 @@ from sim_worker.objects import object_set
 from sim_worker.scenes import generate_scene
 from sim_worker.world import World
 from tests.helpers.runs import check_results, clear_scene, read_csv
+from vgn_contract.tracking import GraspTracker
 
 
 @pytest.fixture

@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 
 from benchmarks.clutter import combinations, markdown_table, parse_args, scenario_config
-from client.gripper_description import (
+from sim_worker.clutter import ClutterConfig, ClutterRemoval
+from sim_worker.datagen import DataGenConfig
+from sim_worker.generate_data import _check_settings
+from vgn_contract.gripper_description import (
     GripperDescriptionError,
     builtin_gripper,
     check_version,
     default_gripper,
 )
-from sim_worker.clutter import ClutterConfig, ClutterRemoval
-from sim_worker.datagen import DataGenConfig
-from sim_worker.generate_data import _check_settings
 from vgn_data.dataset import RawDataset
 
 ROBOTIQ = builtin_gripper("robotiq-2f85")

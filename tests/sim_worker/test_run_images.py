@@ -8,8 +8,6 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from client.geometry import look_at
-from client.schemas import Grasp
 from sim_worker.images import (
     FAILURE_COLOUR,
     GRASP_COLOUR,
@@ -21,6 +19,8 @@ from sim_worker.images import (
 )
 from sim_worker.results import RoundRecord
 from tests.helpers.scenes import INTRINSICS
+from vgn_contract.geometry import look_at
+from vgn_contract.schemas import Grasp
 
 CAMERA = look_at(np.array([0.15, 0.15, 0.6]), np.array([0.15, 0.15, 0.0]), up=(0, 1, 0))
 TOP_DOWN = Grasp(

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Intrinsics
 from sim_worker.sensors import PoseError, StructuredLightNoise, shadowed
+from vgn_contract.schemas import Intrinsics
 
 K = Intrinsics(width=320, height=240, fx=270.0, fy=270.0, cx=160.0, cy=120.0)
 

@@ -13,7 +13,6 @@ import pybullet
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.geometry import check_rigid_matrix, invert, look_at
 from sim_worker.camera import (
     SIM_INTRINSICS,
     TINY_SAMPLE_OFFSET,
@@ -31,6 +30,7 @@ from sim_worker.camera import (
 )
 from sim_worker.world import TABLE_Z, World
 from tests.helpers.scenes import BoxScene
+from vgn_contract.geometry import check_rigid_matrix, invert, look_at
 
 K = SIM_INTRINSICS
 BOX_CENTRE = (0.13, 0.16)  # x, y of the box's centre, metres

@@ -7,10 +7,10 @@ import pybullet
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.geometry import matrix_from_pose
 from sim_worker.grasping import Outcome, execute_grasp, retreat_pose
 from sim_worker.gripper import Gripper
 from sim_worker.world import TABLE_Z, SimObject, World
+from vgn_contract.geometry import matrix_from_pose
 
 DOWN = Rotation.from_euler("x", np.pi)  # approach straight down, fingers closing along world ±y
 SIDE = Rotation.from_euler("y", np.pi / 2)  # approach along world +x

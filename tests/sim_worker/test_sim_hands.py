@@ -13,8 +13,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from client.cli import gripper_argument
-from client.geometry import matrix_from_pose
-from client.gripper_description import (
+from sim_worker.grasping import Outcome, execute_grasp
+from sim_worker.gripper import Gripper, GripperSpec
+from sim_worker.hand_urdf import REPOSITORY, hand_urdf, mirrored, urdf_text
+from sim_worker.world import TABLE_Z, SimObject, World
+from vgn_contract.geometry import matrix_from_pose
+from vgn_contract.gripper_description import (
     BUILTIN_DIR,
     GripperDescription,
     GripperDescriptionError,
@@ -22,10 +26,6 @@ from client.gripper_description import (
     default_gripper,
     parse_gripper,
 )
-from sim_worker.grasping import Outcome, execute_grasp
-from sim_worker.gripper import Gripper, GripperSpec
-from sim_worker.hand_urdf import REPOSITORY, hand_urdf, mirrored, urdf_text
-from sim_worker.world import TABLE_Z, SimObject, World
 
 DOWN = Rotation.from_euler("x", np.pi)  # approach straight down, fingers closing along world ±y
 ACROSS = Rotation.from_euler("z", 90, degrees=True) * DOWN  # fingers closing along world ±x

@@ -13,10 +13,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from benchmarks import slips
-from client.geometry import matrix_from_pose
 from sim_worker.grasping import Outcome, execute_grasp
 from sim_worker.gripper import Gripper, GripperSpec
 from sim_worker.world import TABLE_Z, SimObject, World
+from vgn_contract.geometry import matrix_from_pose
 
 
 def test_each_variant_differs_from_the_shipped_hand_only_where_it_says():

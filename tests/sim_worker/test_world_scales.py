@@ -15,9 +15,9 @@ import pytest
 
 pytest.importorskip("pybullet")
 
-from client.geometry import look_at  # noqa: E402
 from sim_worker.camera import Camera  # noqa: E402
 from sim_worker.world import TABLE_Z, World  # noqa: E402
+from vgn_contract.geometry import look_at  # noqa: E402
 
 #: Straight above the workspace centre, high enough to see both spots.
 TOP_DOWN = look_at((0.15, 0.15, 0.60), (0.15, 0.15, 0.0), up=(0.0, 1.0, 0.0))

@@ -11,7 +11,6 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.schemas import Grasp
 from service.checks import check_grasps
 from service.grid_surface import grid_surface_points
 from service.grip import GripConfig
@@ -39,6 +38,7 @@ from training.labels import LabelSet
 from training.loss import distillation_loss
 from training.quaternions import flipped
 from training.shards import quantize
+from vgn_contract.schemas import Grasp
 from vgn_data.dataset import RawDataset
 
 

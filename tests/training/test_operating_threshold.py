@@ -7,10 +7,10 @@ import json
 import shutil
 from pathlib import Path
 
-from client.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD
 from service.vgn.checkpoint import card_path, weights_id
 from tests.helpers.apps import serve
 from tests.helpers.frames import open_fused_session
+from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD
 
 
 def test_weights_without_a_card_use_vgns_threshold(random_checkpoint: Path):

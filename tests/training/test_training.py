@@ -16,7 +16,6 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from client.schemas import SessionCreate
 from service.core import PlanningService
 from service.planner import GraspPlanner
 from service.vgn.checkpoint import card_path, card_summary, load_vgn, save_vgn, weights_id
@@ -41,6 +40,7 @@ from training.loss import Predictions, gather, per_label_loss, rotation_loss, vg
 from training.metrics import MetricAccumulator, choose_threshold, rotation_error_deg
 from training.quaternions import flipped, multiply
 from training.train import TrainConfig
+from vgn_contract.schemas import SessionCreate
 from vgn_data.dataset import DatasetSetup, RawDataset
 
 

@@ -11,12 +11,12 @@ import pytest
 
 pytest.importorskip("pybullet")
 
-from client.geometry import look_at  # noqa: E402
 from sim_worker.camera import Camera  # noqa: E402
 from sim_worker.recipes import SceneRecipe, object_roots, pose_vector  # noqa: E402
 from sim_worker.world import TABLE_Z, World  # noqa: E402
 from tests.sim_worker.test_world_scales import write_cube  # noqa: E402
 from training.verify_recipes import drawn_at_one_scale, files_at_several_scales, rebuilt_digest  # noqa: E402
+from vgn_contract.geometry import look_at  # noqa: E402
 
 SCALES = (0.8, 1.6)
 

@@ -2,7 +2,7 @@ import argparse
 
 import numpy as np
 
-from client.schemas import Intrinsics
+from vgn_contract.schemas import Intrinsics
 from vgn_data.clean_data import run
 from vgn_data.dataset import DatasetSetup, RawDataset, SceneViews
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from client.gripper_description import (
+from vgn_contract.gripper_description import (
     GripperDescriptionError,
     builtin_gripper,
     builtin_grippers,
@@ -18,7 +18,7 @@ from client.gripper_description import (
     read_gripper,
 )
 
-FRANKA_FILE = Path(__file__).resolve().parents[2] / "client" / "grippers" / "franka.json"
+FRANKA_FILE = Path(__file__).resolve().parents[2] / "vgn_contract" / "grippers" / "franka.json"
 
 
 def franka_data() -> dict:

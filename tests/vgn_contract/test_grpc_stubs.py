@@ -1,4 +1,4 @@
-"""The checked-in gRPC stubs are generated from ``proto/vgn/v1/grasp_planning.proto`` and must not drift."""
+"""The checked-in gRPC stubs are generated from ``vgn_contract/proto/vgn/v1/grasp_planning.proto`` and must not drift."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from client.grpc_api import generate
+from vgn_contract.grpc_api import generate
 
 
 def test_stubs_match_the_proto(tmp_path: Path):
@@ -16,12 +16,12 @@ def test_stubs_match_the_proto(tmp_path: Path):
         committed = generate.PACKAGE_DIR / path.name
         assert committed.read_text() == path.read_text(), (
             f"{committed.name} differs from what grpcio-tools makes of the .proto: regenerate with "
-            "`python -m client.grpc_api.generate` (with the pinned grpcio-tools of the dev extra)"
+            "`python -m vgn_contract.grpc_api.generate` (with the pinned grpcio-tools of the dev extra)"
         )
 
 
 def test_stubs_import_without_the_proto_tree():
     """The service stub imports the message module relatively, so the installed package works."""
-    from client.grpc_api import grasp_planning_pb2, grasp_planning_pb2_grpc
+    from vgn_contract.grpc_api import grasp_planning_pb2, grasp_planning_pb2_grpc
 
     assert grasp_planning_pb2_grpc.vgn_dot_v1_dot_grasp__planning__pb2 is grasp_planning_pb2

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from client.geometry import ORTHONORMAL_TOLERANCE, check_rigid_matrix, pose_from_matrix
-from client.schemas import Pose
+from vgn_contract.geometry import ORTHONORMAL_TOLERANCE, check_rigid_matrix, pose_from_matrix
+from vgn_contract.schemas import Pose
 
 
 def rigid(rotation: np.ndarray, position: np.ndarray) -> np.ndarray:

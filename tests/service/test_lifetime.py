@@ -1,5 +1,5 @@
 """A child started to end with this process does, however this process ends; it asks for that
-itself after exec (importing the server's entry, ``service.app``), so Popen needs no ``preexec_fn`` (see client.lifetime)."""
+itself after exec (importing the server's entry, ``service.app``), so Popen needs no ``preexec_fn`` (see service.launch.lifetime)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import threading
 
 import pytest
 
-from client.lifetime import PARENT_VARIABLE, ending_with_this_process
+from service.launch.lifetime import PARENT_VARIABLE, ending_with_this_process
 from tests.helpers.processes import alive, wait_until_gone
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernel feature is Linux's")
@@ -24,7 +24,7 @@ CHILD = "import os, sys, time, service.app; print(os.environ.get(sys.argv[1], 'u
 def test_the_child_ends_when_its_parent_is_killed():
     parent_script = textwrap.dedent(f"""
         import os, subprocess, sys, time
-        from client.lifetime import ending_with_this_process
+        from service.launch.lifetime import ending_with_this_process
         child = subprocess.Popen([sys.executable, "-c", {CHILD!r}, {PARENT_VARIABLE!r}],
                                  env=ending_with_this_process(dict(os.environ)))
         print(child.pid, flush=True)

@@ -1,4 +1,4 @@
-"""Generate the Python stubs from the ``.proto``: ``python -m client.grpc_api.generate [DIR]``.
+"""Generate the Python stubs from the ``.proto``: ``python -m vgn_contract.grpc_api.generate [DIR]``.
 
 Needs ``grpcio-tools`` (the ``dev`` extra). protoc names the modules after the proto's path
 (``vgn/v1/...``) and imports them absolutely; the stubs live in this package instead, so the
@@ -12,7 +12,8 @@ import tempfile
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
-PROTO_ROOT = PACKAGE_DIR.parent.parent / "proto"
+#: The ``.proto`` ships in this package too, so the stubs can be regenerated from an install.
+PROTO_ROOT = PACKAGE_DIR.parent / "proto"
 PROTO = Path("vgn/v1/grasp_planning.proto")
 STUBS = ("grasp_planning_pb2.py", "grasp_planning_pb2.pyi", "grasp_planning_pb2_grpc.py")
 ABSOLUTE_IMPORT = "from vgn.v1 import grasp_planning_pb2"
