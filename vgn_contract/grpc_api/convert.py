@@ -327,15 +327,8 @@ def model_info(message: pb.ModelInfo) -> ModelInfo:
 
 
 def grasp_defaults(message: pb.GraspDefaults) -> GraspDefaults:
-    """A ``GraspDefaults`` message as the client's model."""
-    return GraspDefaults(
-        turn_average=message.turn_average,
-        clearance=message.clearance,
-        grip=message.grip,
-        threshold=message.threshold,
-        antipodal_threshold=message.antipodal_threshold,
-        fallback_threshold=message.fallback_threshold,
-    )
+    """A ``GraspDefaults`` message as the client's model: field for field, as the model declares them."""
+    return GraspDefaults(**{name: getattr(message, name) for name in GraspDefaults.model_fields})
 
 
 def float_array(data: bytes, shape: tuple[int, ...]) -> np.ndarray:
