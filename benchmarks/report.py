@@ -228,6 +228,9 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                       "(any grip, no steps back) find grasps that hold?"),
     ("support-default-", "What does judging faces just above the table by their horizontal normal do to the "
                          "default request? (Runs that newer results replace in the README's table.)"),
+    ("surface-default-", "What does answering with the observed surface's antipodal pairs, when the network offers "
+                         "nothing that passes the checks, add to the default request? (Runs that newer results "
+                         "replace in the README's table.)"),
     ("support-table-default-", "What does letting the fingertips meet the table in the last centimetre of the approach add "
                                "to the support plane? (Runs that newer results replace in the README's table.)"),
     ("table-contact-", "When the fingertips graze the table under a flat object, does a step back or a larger "
