@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from service.baseline import plan_antipodal
-from service.checks import check_grasps
+from service.checks import Checked, check_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
@@ -35,6 +35,7 @@ from vgn_contract.schemas import (
     ANTIPODAL_DEFAULT_THRESHOLD,
     FrameMeta,
     FrameResult,
+    Grasp,
     GraspDefaults,
     GraspQuery,
     GraspResult,
@@ -271,8 +272,12 @@ class PlanningService:
                 self._keep_output(session_id, key, output)
             model = self.planner.model_id or ""
             threshold = resolved_threshold(query, self.planner.default_threshold)
-        checked = check_grasps(grasps, surface, grid, voxel_size, workspace_pose, workspace_size,
-                               self.grip_config, self.settings.alternatives)  # fmt: skip
+
+        def checked_of(candidates: list[Grasp]) -> Checked:
+            return check_grasps(candidates, surface, grid, voxel_size, workspace_pose, workspace_size,
+                                self.grip_config, self.settings.alternatives)  # fmt: skip
+
+        checked = checked_of(grasps)
         floor = self.settings.fallback_threshold
         checks_ran = surface is not None or grid is not None
         fallback = (not baseline and checks_ran and not checked.grasps and query.threshold is None
@@ -281,20 +286,17 @@ class PlanningService:
             # Nothing passed at the operating threshold: rather than leave the robot with nothing to
             # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
             lower = ranked.model_copy(update={"threshold": floor})
-            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, lower)
-            checked = check_grasps(grasps, surface, grid, voxel_size, workspace_pose, workspace_size,
-                                   self.grip_config, self.settings.alternatives)  # fmt: skip
+            checked = checked_of(self.planner.detect(observed, output, voxel_size, workspace_pose, lower))
             threshold = floor
             if not checked.grasps and self.settings.surface_fallback:
                 # Still nothing: the pairs the observed surface offers, under the same checks.
                 with self.sessions.use(session_id) as session:
                     cloud = session.volume.cloud()
-                config = antipodal_config(ranked.model_copy(update={"threshold": floor}))
-                pairs = plan_antipodal(cloud, workspace_pose, config, session_hand)
-                surface_checked = check_grasps(pairs, surface, grid, voxel_size, workspace_pose, workspace_size,
-                                               self.grip_config, self.settings.alternatives)  # fmt: skip
-                if surface_checked.grasps:
-                    checked, model = surface_checked, "antipodal"
+                pairs = checked_of(
+                    plan_antipodal(cloud, workspace_pose, antipodal_config(lower), session_hand)
+                )
+                if pairs.grasps:
+                    checked, model = pairs, "antipodal"
         grasps = checked.grasps[: query.max_grasps]
         return GraspResult(
             grasps=grasps,

@@ -209,6 +209,12 @@ def mesh_mass_properties(
     return density * volume, com, inertia
 
 
+def shifted_inertia(mass: float, inertia: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """A part's inertia tensor (about its own centre of mass) about a point ``offset`` away from it:
+    the parallel-axis rule, for bodies made of several parts."""
+    return inertia + mass * (offset @ offset * np.eye(3) - np.outer(offset, offset))
+
+
 def _box_inertia(mass: float, size: Sequence[float]) -> np.ndarray:
     x, y, z = size
     return mass / 12.0 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
@@ -251,7 +257,7 @@ def _geometry_xml(block: Block) -> tuple[list[tuple[str, np.ndarray]], float, np
     centers -= masses @ centers / masses.sum()
     inertia = np.zeros((3, 3))
     for m, box, c in zip(masses, shape, centers, strict=True):
-        inertia += _box_inertia(m, box.size) + m * (c @ c * np.eye(3) - np.outer(c, c))
+        inertia += shifted_inertia(m, _box_inertia(m, box.size), c)
     elements = [(f'<box size="{_fmt(box.size)}"/>', c) for box, c in zip(shape, centers, strict=True)]
     return elements, float(masses.sum()), inertia
 

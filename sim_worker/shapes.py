@@ -26,6 +26,7 @@ from sim_worker.objects import (
     mesh_mass_properties,
     obj_text,
     rigid_urdf,
+    shifted_inertia,
     write_atomic,
 )
 
@@ -114,8 +115,8 @@ def _compound(rng: np.random.Generator) -> list[Part]:
     if kind in ("ell", "tee"):
         post = np.array([rng.uniform(0.02, 0.04), bar[1] * 2, rng.uniform(0.03, 0.07)]) / 2
         x = bar[0] - post[0] if kind == "ell" else 0.0
-        parts.append(_solid(rng, post))
-        parts[-1] = Part(parts[-1].vertices + [x, 0.0, bar[2] + post[2] * 0.9], parts[-1].faces)
+        on_top = _solid(rng, post)
+        parts.append(Part(on_top.vertices + [x, 0.0, bar[2] + post[2] * 0.9], on_top.faces))
     elif kind == "handle":
         body = np.array([rng.uniform(0.025, 0.035)] * 2 + [rng.uniform(0.03, 0.06)])
         grip = np.array([rng.uniform(0.012, 0.02), 0.008, body[2] * 0.7])
@@ -155,10 +156,7 @@ def shape_urdf(index: int, directory: Path) -> Path:
     properties = [mesh_mass_properties(p.vertices, p.faces, density) for p in parts]
     masses = np.array([m for m, _, _ in properties])
     com = sum(m * c for m, c, _ in properties) / masses.sum()
-    inertia = np.zeros((3, 3))
-    for m, c, own in properties:
-        offset = c - com
-        inertia += own + m * (offset @ offset * np.eye(3) - np.outer(offset, offset))
+    inertia = sum(shifted_inertia(m, own, c - com) for m, c, own in properties)
     elements = []
     for k, part in enumerate(parts):
         mesh = f"{name}_{k}.obj"

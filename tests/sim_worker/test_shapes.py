@@ -44,7 +44,7 @@ def test_every_family_is_made_and_every_part_is_a_closed_convex_mesh() -> None:
             centre = part.vertices.mean(axis=0)
             # Outward, and every vertex behind every face's plane: convex.
             assert np.all(np.einsum("ij,ij->i", normals, a - centre) > 0)
-            heights = (part.vertices[None] - a[:, None]) @ np.eye(3)
+            heights = part.vertices[None] - a[:, None]
             assert np.all(np.einsum("fvk,fk->fv", heights, normals) <= 1e-9)
     assert families == set(FAMILIES)
 
