@@ -336,8 +336,8 @@ class PlanningService:
         )
 
     def model_info(self) -> ModelInfo:
-        """What ``GET /model`` reports: the weights, device, threshold, card, request defaults and
-        runtime settings."""
+        """What ``GET /model`` reports: the weights, device, card, request defaults (the threshold
+        among them) and runtime settings."""
         defaults = self.grasp_defaults()
         # The runtime still repeats the defaults it held before they had a model of their own.
         repeated = defaults.model_dump(
@@ -352,7 +352,6 @@ class PlanningService:
             device=str(self.planner.device),
             detail=None if self.planner.ready else NO_MODEL_MESSAGE,
             conventions=CONVENTIONS,
-            threshold=self.planner.default_threshold,
             card=self.planner.card,
             defaults=defaults,
             runtime=RuntimeInfo.model_validate({**runtime_report(), **self.planner.runtime(), **repeated}),

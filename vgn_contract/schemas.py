@@ -487,8 +487,8 @@ class MallocSettings(_Model):
 
 
 def _moved_to_defaults(name: str) -> Any:
-    """A request default that ``RuntimeInfo`` still repeats for clients that read it there, for one
-    release: ``ModelInfo.defaults`` holds it now."""
+    """A request default that ``ModelInfo`` or its ``RuntimeInfo`` still repeats for clients that read
+    it there, for one release: ``ModelInfo.defaults`` holds it now."""
     return Field(
         default=None,
         deprecated=f"read ModelInfo.defaults.{name}",
@@ -531,10 +531,7 @@ class ModelInfo(_Model):
     device: str
     detail: str | None = Field(default=None, description="why no model is loaded, if none is")
     conventions: dict[str, str]
-    threshold: float = Field(
-        description="threshold of vgn grasp requests that give none: the model card's operating threshold, "
-        f"else {VGN_DEFAULT_THRESHOLD} (VGN's); defaults.threshold is the same"
-    )
+    threshold: float | None = _moved_to_defaults("threshold")
     card: dict[str, Any] | None = Field(
         default=None,
         description="from the model card beside the weights (<name>.card.json), when there is one: "
@@ -552,6 +549,14 @@ class ModelInfo(_Model):
         "set it before torch loaded), allocator settings, inference form, precision, micro-batching window "
         "and counts; its turn_average, clearance, grip and fallback_threshold are deprecated (read defaults)",
     )
+
+    @model_validator(mode="after")
+    def _repeat_the_threshold(self) -> ModelInfo:
+        """The deprecated ``threshold`` is ``defaults.threshold`` again, never a value of its own;
+        only an answer from a service older than ``defaults`` brings its own."""
+        if self.defaults is not None:
+            self.__dict__["threshold"] = self.defaults.threshold  # no warning: this is no reader
+        return self
 
 
 class Health(_Model):

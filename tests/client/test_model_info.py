@@ -3,6 +3,8 @@ reports, as the client parses them from HTTP's JSON and from gRPC, older service
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from vgn_contract.grpc_api import convert
@@ -41,6 +43,24 @@ def test_the_defaults_that_moved_are_marked_deprecated_where_they_were():
     for name in moved:
         assert schema[name]["deprecated"] is True and f"defaults.{name}" in schema[name]["description"]
     assert not any(schema[name].get("deprecated") for name in set(schema) - moved)
+
+
+def test_the_threshold_is_said_once_in_the_defaults_and_repeated_deprecated():
+    """The top-level ``threshold`` is ``defaults.threshold`` again, whatever was given beside it;
+    from a service older than ``defaults`` it is the one it sent."""
+    info = ModelInfo.model_validate({**MODEL, "threshold": 0.3, "defaults": DEFAULTS.model_dump()})
+    assert ModelInfo.model_json_schema()["properties"]["threshold"]["deprecated"] is True
+    with pytest.deprecated_call(match="defaults.threshold"):
+        assert info.threshold == DEFAULTS.threshold
+    assert json.loads(info.model_dump_json())["threshold"] == DEFAULTS.threshold, "still on the wire"
+    without = ModelInfo.model_validate(
+        {k: v for k, v in MODEL.items() if k != "threshold"} | {"defaults": DEFAULTS}
+    )
+    assert without.model_dump()["threshold"] == DEFAULTS.threshold
+    assert ModelInfo.model_validate(MODEL).model_dump()["threshold"] == MODEL["threshold"], "an older service"
+    message = convert.model_info_message(without)
+    assert message.threshold == DEFAULTS.threshold, "gRPC's deprecated field too"
+    assert pb.ModelInfo.DESCRIPTOR.fields_by_name["threshold"].GetOptions().deprecated
 
 
 def test_model_info_travels_over_grpc_typed():

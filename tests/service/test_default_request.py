@@ -5,6 +5,7 @@ move the default; checked against real servers on loopback, over HTTP, gRPC and 
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 
 import grpc
@@ -15,6 +16,7 @@ from client.grpc_client import GRPCClient
 from client.http import VGNClient
 from service.launch.embedded import EmbeddedService
 from service.settings import PACKAGED_MODEL
+from service.vgn.checkpoint import card_path
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 from vgn_contract.grpc_api import convert
 from vgn_contract.grpc_api import grasp_planning_pb2 as pb
@@ -117,15 +119,17 @@ def test_both_off_is_the_plain_answer_an_operator_default_off_gives(default, pla
 def test_the_model_reports_the_defaults_the_operator_chose(default, plain):
     """As typed ``defaults``, over HTTP and gRPC alike; for clients that read them under ``runtime``
     there too, for one release."""
+    operating = json.loads(card_path(PACKAGED_MODEL).read_text())["threshold"]
     for service, expected in ((default, True), (plain, False)):
         with VGNClient(service.url) as http, GRPCClient(service.grpc_url) as rpc:
             said = [http.model().defaults, rpc.model().defaults]
             assert said[0] == said[1] == GraspDefaults(
-                turn_average=expected, clearance=expected, grip=expected, threshold=http.model().threshold,
+                turn_average=expected, clearance=expected, grip=expected, threshold=operating,
                 antipodal_threshold=0.5, fallback_threshold=0.5,
             )  # fmt: skip
         body = httpx.get(f"{service.url}/model").json()
         assert body["defaults"] == said[0].model_dump()
+        assert body["threshold"] == operating, "the deprecated copy of defaults.threshold"
         repeated = {
             key: body["runtime"][key] for key in ("turn_average", "clearance", "grip", "fallback_threshold")
         }

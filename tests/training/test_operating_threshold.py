@@ -13,9 +13,15 @@ from tests.helpers.frames import open_fused_session
 from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, VGN_DEFAULT_THRESHOLD
 
 
+def operating_threshold(model: dict) -> float:
+    """``/model``'s operating threshold, which its deprecated top-level ``threshold`` repeats."""
+    assert model["threshold"] == model["defaults"]["threshold"]
+    return model["defaults"]["threshold"]
+
+
 def test_weights_without_a_card_use_vgns_threshold(random_checkpoint: Path):
     with serve(random_checkpoint) as http:
-        assert http.get("/model").json()["threshold"] == VGN_DEFAULT_THRESHOLD
+        assert operating_threshold(http.get("/model").json()) == VGN_DEFAULT_THRESHOLD
         session = open_fused_session(http)
         # Without the checks there is no fallback below the operating threshold to report instead.
         unchecked = {"clearance": "false", "grip": "false"}
@@ -33,7 +39,7 @@ def test_the_cards_threshold_is_the_default_and_a_request_overrides_it(
     with serve(weights) as http:
         model = http.get("/model").json()
         assert (
-            model["threshold"] == 0.0
+            operating_threshold(model) == 0.0
             and model["card"]["threshold"] == 0.0
             and model["card"]["matches_weights"]
         )
@@ -59,4 +65,4 @@ def test_a_card_threshold_outside_0_1_is_ignored(random_checkpoint: Path, tmp_pa
     shutil.copy(random_checkpoint, weights)
     card_path(weights).write_text(json.dumps({"threshold": 7, "model": {}}))
     with serve(weights) as http:
-        assert http.get("/model").json()["threshold"] == VGN_DEFAULT_THRESHOLD
+        assert operating_threshold(http.get("/model").json()) == VGN_DEFAULT_THRESHOLD

@@ -306,8 +306,11 @@ def gripper_list(message: pb.GripperList) -> GripperList:
 
 
 def model_info(message: pb.ModelInfo) -> ModelInfo:
-    """A ``ModelInfo`` reply as the client's model, card and runtime decoded from JSON."""
+    """A ``ModelInfo`` reply as the client's model, card and runtime decoded from JSON; the deprecated
+    ``threshold`` is taken from the reply only where it has no defaults to repeat."""
     data = optional_fields(message, ("model_id", "source", "detail"))
+    if not message.HasField("defaults"):
+        data["threshold"] = message.threshold
     return ModelInfo(
         loaded=message.loaded,
         model_id=data.get("model_id"),
@@ -317,7 +320,7 @@ def model_info(message: pb.ModelInfo) -> ModelInfo:
         device=message.device,
         detail=data.get("detail"),
         conventions=dict(message.conventions),
-        threshold=message.threshold,
+        threshold=data.get("threshold"),
         card=json.loads(message.card_json) if message.HasField("card_json") else None,
         defaults=grasp_defaults(message.defaults) if message.HasField("defaults") else None,
         runtime=RuntimeInfo.model_validate_json(message.runtime_json)
