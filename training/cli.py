@@ -49,14 +49,21 @@ examples:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``vgn-train`` command line: one option per ``TrainConfig`` field (``training.options``),
-    grouped as data, training and machine, and the few switches of the command itself."""
+    grouped as data, observations, training and machine, and the few switches of the command itself."""
     parser = argparse.ArgumentParser(
         prog="vgn-train",
         description=DESCRIPTION,
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    groups = {title: parser.add_argument_group(title) for title in ("data", "training")}
+    groups = {
+        "data": parser.add_argument_group("data"),
+        "observations": parser.add_argument_group(
+            "observations", "recipe folders: each scene's observations, rendered from its recipe and\n"
+            "cached (see --cache)"
+        ),
+        "training": parser.add_argument_group("training"),
+    }  # fmt: skip
     evaluation = parser.add_argument_group("executed-grasp evaluation (needs the simulator extra)")
     groups["machine"] = parser.add_argument_group("machine")
     add_options(groups, TrainConfig)

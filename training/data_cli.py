@@ -20,7 +20,8 @@ from pathlib import Path
 
 from client.log_level import add_log_level_option, configure_logging
 from sim_worker.recipes import RecipeError
-from training.observations import VIEWS, ObservationSettings
+from training.observations import ObservationSettings
+from training.options import add_options, config_values
 from training.shards import ShardError
 
 
@@ -76,20 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
     render = commands.add_parser("render", help="render K observations per scene into a cache for vgn-train")
     render.add_argument("data", type=Path)
     render.add_argument("--out", type=Path, help="cache folder (default: ~/.cache/vgn-service/observations)")
-    render.add_argument(
-        "--per-scene", type=int, default=1, help="observations per scene (default %(default)s)"
-    )
-    render.add_argument("--noise-fraction", type=float, default=ObservationSettings.noise_fraction,
-                        help="share of fresh observations with Dex-Net depth noise (default %(default)s)")  # fmt: skip
-    render.add_argument("--sensor", choices=["dex", "structured-light"], default=ObservationSettings.sensor,
-                        help="depth errors of the noisy fresh observations (default %(default)s)")  # fmt: skip
-    render.add_argument("--side-view-fraction", type=float, default=ObservationSettings.side_view_fraction,
-                        help="share of fresh observations that are one side view (default %(default)s)")  # fmt: skip
-    render.add_argument("--views", choices=VIEWS, default=ObservationSettings.views,
-                        help="fresh observations from data generation's random views or VGN's six "
-                        "evaluation views (default %(default)s)")  # fmt: skip
-    render.add_argument("--no-original", dest="original", action="store_false",
-                        help="every observation fresh (default: the first is the scene's original one)")  # fmt: skip
+    observations = render.add_argument_group("observations", "how each scene's observations are drawn")
+    add_options({"observations": observations}, ObservationSettings, own_names=True)
     render.add_argument("--workers", type=int, default=1)
     render.add_argument("--vgn-objects", help="folder of VGN's object sets (default $VGN_OBJECTS)")
 
@@ -135,14 +124,17 @@ def _pack(args: argparse.Namespace) -> int:
     return _show(argparse.Namespace(data=args.out))
 
 
+def render_settings(args: argparse.Namespace) -> ObservationSettings:
+    """The observations ``vgn-data render`` makes: its options are ``ObservationSettings``' fields."""
+    return ObservationSettings(**config_values(args, ObservationSettings))
+
+
 def _render(args: argparse.Namespace) -> int:
     from sim_worker.objects import default_cache_dir
     from training.observations import render_cache
     from training.recipe_shards import RecipeFolder
 
-    settings = ObservationSettings(per_scene=args.per_scene, original=args.original,
-                                   noise_fraction=args.noise_fraction, sensor=args.sensor,
-                                   side_view_fraction=args.side_view_fraction, views=args.views)  # fmt: skip
+    settings = render_settings(args)
     if args.workers < 1:
         raise ValueError("--workers must be >= 1")
     out = args.out or default_cache_dir() / "observations"

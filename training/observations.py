@@ -55,16 +55,16 @@ class ObservationSettings:
     errors of ``sensor``: ``"dex"`` (Dex-Net noise, ``sim_worker.camera.DepthNoise``) or
     ``"structured-light"`` (``sim_worker.sensors.StructuredLightNoise``; docs/sensors.md).
     ``views="six"`` takes VGN's six evaluation views instead of random ones (no side views).
-    Each field's metadata is also its ``vgn-train`` option (``training.options``); ``max_views`` and
-    ``seed`` have none.
+    Each field's metadata is also its option (``training.options``), in ``vgn-train`` and, named
+    after the field, in ``vgn-data render``; ``max_views`` and ``seed`` have none.
     """
 
     per_scene: int = field(
         default=1,
         metadata=option(
-            "data",
-            "recipe folders: observations rendered per scene (cached, see --cache); with K > 1 every "
-            "draw of a scene shows one of them at random (default %(default)s: the original observation only)",
+            "observations",
+            "observations rendered per scene; with K > 1 every draw of a scene in training shows one of "
+            "them at random (default %(default)s: the original observation only)",
             flag="--observations",
             metavar="K",
         ),
@@ -72,14 +72,14 @@ class ObservationSettings:
     original: bool = field(
         default=True,
         metadata=option(
-            "data", "recipe folders: every observation fresh (default: the first is the scene's original one)"
+            "observations", "every observation fresh (default: the first is the scene's original one)"
         ),
     )
     max_views: int = field(default=6, metadata=NOT_AN_OPTION)
     side_view_fraction: float = field(
         default=0.2,
         metadata=option(
-            "data",
+            "observations",
             "share of fresh observations that are one side view (default %(default)s)",
             flag="--observation-side-views",
             metavar="F",
@@ -88,8 +88,8 @@ class ObservationSettings:
     noise_fraction: float = field(
         default=0.5,
         metadata=option(
-            "data",
-            "share of fresh observations with Dex-Net depth noise (default %(default)s)",
+            "observations",
+            "share of fresh observations whose depth carries the sensor's errors (default %(default)s)",
             flag="--observation-noise",
             metavar="F",
         ),
@@ -97,7 +97,7 @@ class ObservationSettings:
     sensor: str = field(
         default="dex",
         metadata=option(
-            "data",
+            "observations",
             "the depth errors of noisy fresh observations: Dex-Net noise or a structured-light camera's "
             "(docs/sensors.md; default %(default)s)",
             flag="--observation-sensor",
@@ -108,7 +108,7 @@ class ObservationSettings:
     views: str = field(
         default="random",
         metadata=option(
-            "data",
+            "observations",
             "where fresh observations' cameras stand: data generation's random views or VGN's six "
             "evaluation views, the benchmark's; six takes no side views (default %(default)s)",
             flag="--observation-views",

@@ -25,8 +25,9 @@ class Option:
     """How a field appears on the command line.
 
     ``flag`` defaults to ``--field-name`` (``--no-field-name`` for a bool that is on by default);
-    ``none`` is the word that stands for None, and ``off`` a flag that gives that word; ``parse``
-    turns the text into the value where the field's type cannot.
+    a command of the settings alone keeps that name (:func:`add_options`'s ``own_names``), so
+    ``flag`` is the name among other options. ``none`` is the word that stands for None, and ``off``
+    a flag that gives that word; ``parse`` turns the text into the value where the type cannot.
     """
 
     group: str
@@ -86,11 +87,12 @@ def declared_options(config: type, prefix: str = "") -> Iterator[Declared]:
             yield Declared(prefix + field.name, field, kind, field.metadata[OPTION])
 
 
-def add_options(groups: dict[str, argparse._ArgumentGroup], config: type) -> None:
-    """Add one argument per option of ``config`` to its group in ``groups`` (titles to groups)."""
+def add_options(groups: dict[str, argparse._ArgumentGroup], config: type, own_names: bool = False) -> None:
+    """Add one argument per option of ``config`` to its group in ``groups`` (titles to groups);
+    with ``own_names`` each flag is named after its field, whatever flag it declares."""
     for declared in declared_options(config):
         group = groups[declared.option.group]
-        flag, arguments = _argument(declared)
+        flag, arguments = _argument(declared, own_names)
         group.add_argument(flag, **arguments)
         if declared.option.off is not None:
             group.add_argument(
@@ -117,10 +119,12 @@ def config_values(args: argparse.Namespace, config: type, prefix: str = "") -> d
     return values
 
 
-def _argument(declared: Declared) -> tuple[str, dict[str, Any]]:
+def _argument(declared: Declared, own_names: bool = False) -> tuple[str, dict[str, Any]]:
     """The flag and ``add_argument`` keywords of one option."""
     option, kind, default = declared.option, _inner(declared.kind), declared.default
     name = declared.field.name.replace("_", "-")
+    if own_names:
+        option = dataclasses.replace(option, flag=None)
     arguments: dict[str, Any] = {"dest": declared.dest, "help": option.help}
     if kind is bool:
         flag = option.flag or (f"--no-{name}" if default else f"--{name}")
