@@ -5,8 +5,12 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from client.moved import warn_moved
+
 if TYPE_CHECKING:
     from service.launch.embedded import EmbeddedService, bind_error, free_port
+
+warn_moved("client.embedded", "service.launch.embedded")
 
 __all__ = [
     "EmbeddedService",

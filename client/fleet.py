@@ -5,8 +5,12 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from client.moved import warn_moved
+
 if TYPE_CHECKING:
     from service.launch.fleet import EXEC_ENDING_WITH_PARENT, Fleet, FleetConfig, FleetError
+
+warn_moved("client.fleet", "service.launch.fleet")
 
 __all__ = [
     "EXEC_ENDING_WITH_PARENT",

@@ -1,5 +1,6 @@
 """Moved to ``vgn_contract.geometry`` (the wire contract); re-exported here for one release."""
 
+from client.moved import warn_moved
 from vgn_contract.geometry import (
     ORTHONORMAL_TOLERANCE,
     STEM_LENGTH,
@@ -12,6 +13,8 @@ from vgn_contract.geometry import (
     matrix_from_pose,
     pose_from_matrix,
 )
+
+warn_moved("client.geometry", "vgn_contract.geometry")
 
 __all__ = [
     "ORTHONORMAL_TOLERANCE",

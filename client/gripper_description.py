@@ -1,5 +1,6 @@
 """Moved to ``vgn_contract.gripper_description`` (the wire contract); re-exported here for one release."""
 
+from client.moved import warn_moved
 from vgn_contract.gripper_description import (
     BUILTIN_DIR,
     DEFAULT_GRIPPER,
@@ -23,6 +24,8 @@ from vgn_contract.gripper_description import (
     parse_gripper,
     read_gripper,
 )
+
+warn_moved("client.gripper_description", "vgn_contract.gripper_description")
 
 __all__ = [
     "BUILTIN_DIR",

@@ -6,8 +6,12 @@ import importlib
 import sys
 from typing import TYPE_CHECKING, Any
 
+from client.moved import warn_moved
+
 if TYPE_CHECKING:
     from service.launch.haproxy import ProxyConfig, Replica, main, numbered, render
+
+warn_moved("client.haproxy", "service.launch.haproxy")
 
 __all__ = [
     "ProxyConfig",

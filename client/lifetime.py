@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from client.moved import warn_moved
+
 if TYPE_CHECKING:
     from service.launch.lifetime import (
         PARENT_VARIABLE,
@@ -12,6 +14,8 @@ if TYPE_CHECKING:
         end_with_parent_if_asked,
         ending_with_this_process,
     )
+
+warn_moved("client.lifetime", "service.launch.lifetime")
 
 __all__ = [
     "PARENT_VARIABLE",

@@ -1,5 +1,6 @@
 """Moved to ``vgn_contract.schemas`` (the wire contract); re-exported here for one release."""
 
+from client.moved import warn_moved
 from vgn_contract.schemas import (
     ANTIPODAL_DEFAULT_THRESHOLD,
     MAX_IMAGE_PIXELS,
@@ -33,6 +34,8 @@ from vgn_contract.schemas import (
     Vector3,
     Workspace,
 )
+
+warn_moved("client.schemas", "vgn_contract.schemas")
 
 __all__ = [
     "ANTIPODAL_DEFAULT_THRESHOLD",

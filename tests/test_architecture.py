@@ -60,7 +60,7 @@ RUNTIME_DISPATCH: frozenset[tuple[str, str]] = frozenset(
 #: The old ``client`` modules of process management, which moved to ``service.launch``: each
 #: forwards its names there for one release, loading the module on first use (importlib; the
 #: import for type checkers never runs), so importing ``client`` loads nothing of the server's
-#: package. Goes with those modules.
+#: package; its deprecation warning names the module too. Goes with those modules.
 FORWARDS: frozenset[tuple[str, str]] = frozenset(
     {
         ("client/embedded.py", "service.launch.embedded"),
@@ -184,7 +184,7 @@ def violations(
                     continue
                 if ref.how == "string" and (ref.path, ref.module) in dispatch:
                     continue
-                if ref.how != "string" and (ref.path, ref.module) in forwards:
+                if (ref.path, ref.module) in forwards:
                     continue
                 others = ", ".join(sorted(allowed)) or "none of the other packages"
                 found.append(

@@ -1,5 +1,6 @@
 """Moved to ``vgn_contract.grpc_api.convert`` (the wire contract); re-exported here for one release."""
 
+from client.moved import warn_moved
 from vgn_contract.grpc_api.convert import (
     ENCODING_OF_MEDIA_TYPE,
     MEDIA_TYPE_OF_ENCODING,
@@ -37,6 +38,8 @@ from vgn_contract.grpc_api.convert import (
     workspace_dict,
     workspace_message,
 )
+
+warn_moved("client.grpc_api.convert", "vgn_contract.grpc_api.convert")
 
 __all__ = [
     "ENCODING_OF_MEDIA_TYPE",

@@ -1,5 +1,6 @@
 """Moved to ``vgn_contract.grpc_api.grasp_planning_pb2``; re-exported here for one release."""
 
+from client.moved import warn_moved
 from vgn_contract.grpc_api.grasp_planning_pb2 import (
     DEPTH_ENCODING_PNG16,
     DEPTH_ENCODING_RAW_FLOAT32,
@@ -42,6 +43,8 @@ from vgn_contract.grpc_api.grasp_planning_pb2 import (
     Vector3,
     Workspace,
 )
+
+warn_moved("client.grpc_api.grasp_planning_pb2", "vgn_contract.grpc_api.grasp_planning_pb2")
 
 __all__ = [
     "Cloud",
