@@ -1,15 +1,15 @@
-"""``vgn-client``: talk to a grasp-planning service, or start one.
+"""vgn-client: talk to a grasp-planning service, or start one.
 
-    vgn-client serve                      # run the service on 127.0.0.1:8000 (needs the [service] extra)
+    vgn-client serve                      # run the service on 127.0.0.1:8000 (needs the service extra)
     vgn-client serve --replicas 2         # two service processes behind HAProxy on the same ports
     vgn-client status                     # health, readiness and model of a running service
     vgn-client sessions                   # list live sessions
     vgn-client grasps SESSION --top 5     # best grasps of a session as a table
     vgn-client view SESSION --out v.html  # save the 3D session viewer (or open it in a browser)
-    vgn-client clear-scene --sim          # simulated clutter removal (needs the [all] extras)
+    vgn-client clear-scene --sim          # simulated clutter removal (needs the service and sim extras)
 
-``--url`` (or ``VGN_URL``, ``grpc://HOST:PORT`` for gRPC) picks the service and ``--api-key``
-(or ``VGN_API_KEY``) its key; ``--log-level`` sets what the libraries report on stderr.
+--url (or VGN_URL, grpc://HOST:PORT for gRPC) picks the service and --api-key (or VGN_API_KEY)
+its key; --log-level sets what the libraries report on stderr.
 """
 
 from __future__ import annotations
@@ -160,7 +160,8 @@ def _add_connection(parser: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``vgn-client`` command line: one subcommand per task, each with its own options."""
+    """The ``vgn-client`` command line: one subcommand per task, each with its own options; the
+    module docstring, written as plain text, is its help."""
     parser = argparse.ArgumentParser(
         prog="vgn-client", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -173,8 +174,10 @@ def build_parser() -> argparse.ArgumentParser:
         "own behind HAProxy, which listens on --host/--port (HTTP) and --grpc-port and routes each session to "
         "one replica (docs/fleet.md); a replica that dies is started again. Ctrl-C or SIGTERM stops them all.",
     )
-    serve.add_argument("--host", default="127.0.0.1")
-    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--host", default="127.0.0.1",
+                       help="address to listen on for HTTP, and for gRPC unless VGN_GRPC_HOST names another "
+                       "(0.0.0.0: every interface; default %(default)s)")  # fmt: skip
+    serve.add_argument("--port", type=int, default=8000, help="HTTP port (default %(default)s)")
     serve.add_argument("--model", help="weights file (sets VGN_MODEL)")
     serve.add_argument("--grpc-port", type=int, help="gRPC port (sets VGN_GRPC_PORT; default 50051, 0: off)")
     serve.add_argument(

@@ -1,4 +1,4 @@
-"""``vgn-data``: the repository's training data as scene recipes.
+"""vgn-data: the repository's training data as scene recipes.
 
     vgn-data show data                                    what the folder holds
     vgn-data verify data --scenes 200                     rebuild random scenes, compare with their grids
@@ -7,8 +7,8 @@
     vgn-data pack RAW --source pile --out data            new raw scenes (with recipes) as shards
     vgn-data legacy-grids data --out DIR                  the grid shards a migration replaced, from git history
 
-VGN's object sets are found through ``--vgn-objects`` or ``$VGN_OBJECTS`` (the folder holding
-``pile/``, ``packed/`` and ``blocks/``); see data/README.md.
+VGN's object sets are found through --vgn-objects or $VGN_OBJECTS (the folder holding pile/,
+packed/ and blocks/); see data/README.md.
 """
 
 from __future__ import annotations

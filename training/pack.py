@@ -1,10 +1,10 @@
-"""``vgn-pack-data``: pack raw datasets into the repository's append-only training shards.
+"""vgn-pack-data: pack raw datasets into the repository's append-only training shards.
 
     vgn-pack-data ~/vgn-data/raw-v2/pile --source pile --out data
     vgn-pack-data --show data
 
 Each run fuses the scenes of the raw folder that no shard of that source holds yet, writes
-them as new shards (never touching old ones) and extends ``manifest.json``. Raw depth stays
+them as new shards (never touching old ones) and extends manifest.json. Raw depth stays
 where it is; a scene can be made again from its seed (the manifest records the generator's
 settings).
 """
