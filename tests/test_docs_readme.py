@@ -7,6 +7,7 @@ a heading that exists there).
 
 from __future__ import annotations
 
+import argparse
 import re
 from pathlib import Path
 
@@ -77,3 +78,19 @@ def test_readme_links_into_the_documentation():
     pages = {t.partition("#")[0] for t in relative_links(README.read_text()) if t.startswith("docs/")}
     assert {"docs/getting-started.md", "docs/http-api.md", "docs/grpc-api.md", "docs/client.md",
             "docs/benchmark.md", "docs/data-and-training.md", "docs/performance.md"} <= pages  # fmt: skip
+
+
+def test_readme_says_what_the_first_command_runs():
+    """One round with clear-scene's defaults, not the benchmark of the results table."""
+    from client.cli import build_parser
+
+    commands = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    defaults = commands.choices["clear-scene"].parse_args([])
+    said = " ".join(README.read_text().split("The first command", 1)[1].split("\n\n", 1)[0].split())
+    assert (defaults.rounds, defaults.object_count, defaults.scene, defaults.selection) == (
+        1,
+        5,
+        "blocks",
+        "best",
+    )
+    assert "runs one round" in said and "5 blocks, the best grasp each time" in said, said
