@@ -9,6 +9,7 @@ import argparse
 from benchmarks import clutter
 from client.cli import build_parser
 from service.settings import Settings
+from vgn_contract.grpc_api import convert
 from vgn_contract.grpc_api import grasp_planning_pb2 as pb
 from vgn_contract.schemas import SWITCHES, GraspDefaults, GraspQuery, GraspResult
 
@@ -28,6 +29,29 @@ def subcommand(name: str) -> argparse.ArgumentParser:
 def test_the_grpc_query_carries_exactly_the_http_querys_options():
     grpc_fields = {field.name for field in pb.GraspQuery.DESCRIPTOR.fields} - ADDRESSING
     assert grpc_fields == set(GraspQuery.model_fields)
+
+
+#: A value other than the default for every grasp query option.
+EVERY_OPTION_SET = GraspQuery(
+    planner="antipodal", threshold=0.25, max_grasps=7, nms_size=3, crop_min="0.01,0.02,0.03",
+    crop_max="0.2,0.25,0.3", approach="0,0.5,-1", max_approach_angle=30.0, clearance=False, grip=True,
+    turn_average=False,
+)  # fmt: skip
+
+
+def test_every_query_option_crosses_grpc_both_ways():
+    assert EVERY_OPTION_SET.model_fields_set == set(GraspQuery.model_fields), (
+        "a new option wants a value here"
+    )
+    message = convert.grasp_query_message("s", EVERY_OPTION_SET)
+    assert {field.name for field, _ in message.ListFields()} - ADDRESSING == set(GraspQuery.model_fields)
+    back = GraspQuery.model_validate(convert.grasp_query_dict(message))
+    assert back.model_dump(exclude={"crop_min", "crop_max", "approach"}) == EVERY_OPTION_SET.model_dump(
+        exclude={"crop_min", "crop_max", "approach"}
+    )
+    assert all(back.vector(name) == EVERY_OPTION_SET.vector(name) for name in convert.QUERY_VECTORS)
+    unset = convert.grasp_query_message("s", GraspQuery())
+    assert GraspQuery.model_validate(convert.grasp_query_dict(unset)) == GraspQuery(), "unset stays unset"
 
 
 def test_the_command_lines_grasps_and_view_take_every_query_option():

@@ -341,12 +341,16 @@ class GraspQuery(_Model):
         """``crop_min`` and ``crop_max`` as numbers (either may be ``None``), or ``None`` without a crop."""
         if self.crop_min is None and self.crop_max is None:
             return None
-        return _parse_vector3("crop_min", self.crop_min), _parse_vector3("crop_max", self.crop_max)
+        return self.vector("crop_min"), self.vector("crop_max")
 
     @property
     def approach_direction(self) -> tuple[float, float, float] | None:
         """``approach`` as numbers, or ``None`` when not given."""
-        return _parse_vector3("approach", self.approach)
+        return self.vector("approach")
+
+    def vector(self, name: str) -> tuple[float, float, float] | None:
+        """The 'x,y,z' option ``name`` as numbers, or ``None`` when not given."""
+        return _parse_vector3(name, getattr(self, name))
 
     def to_params(self) -> dict[str, Any]:
         """Query parameters for the request, the options left unset omitted; a switch that is set

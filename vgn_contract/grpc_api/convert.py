@@ -13,7 +13,6 @@ import numpy as np
 
 from vgn_contract.grpc_api import grasp_planning_pb2 as pb
 from vgn_contract.schemas import (
-    SWITCHES,
     FrameResult,
     GraspDefaults,
     GraspQuery,
@@ -38,6 +37,15 @@ MEDIA_TYPE_OF_ENCODING = {
 ENCODING_OF_MEDIA_TYPE = {media: encoding for encoding, media in MEDIA_TYPE_OF_ENCODING.items()}
 PLANNER_NAMES = {pb.PLANNER_UNSPECIFIED: "vgn", pb.PLANNER_VGN: "vgn", pb.PLANNER_ANTIPODAL: "antipodal"}
 PLANNERS = {"vgn": pb.PLANNER_VGN, "antipodal": pb.PLANNER_ANTIPODAL}
+#: How the grasp query's options travel, read off its declaration and the message: the 'x,y,z'
+#: options as vectors, the planner as its enum, every other one as an optional scalar.
+_QUERY_FIELDS = pb.GraspQuery.DESCRIPTOR.fields_by_name
+QUERY_VECTORS = tuple(
+    name for name in GraspQuery.model_fields if _QUERY_FIELDS[name].message_type is not None
+)
+QUERY_SCALARS = tuple(
+    name for name in GraspQuery.model_fields if name != "planner" and name not in QUERY_VECTORS
+)
 
 
 # protobuf -> dicts the schemas validate ------------------------------------------------------
@@ -103,12 +111,9 @@ def frame_meta_dict(message: pb.Frame) -> dict[str, Any]:
 def grasp_query_dict(message: pb.GraspQuery) -> dict[str, Any]:
     """A ``GraspQuery`` dict with vectors as 'x,y,z' text, so the HTTP rules apply; an unknown planner is
     passed on for the schema to refuse."""
-    data = optional_fields(
-        message,
-        ("threshold", "max_grasps", "nms_size", "max_approach_angle", "clearance", "grip", "turn_average"),
-    )
+    data = optional_fields(message, QUERY_SCALARS)
     data["planner"] = PLANNER_NAMES.get(message.planner, f"unknown planner {message.planner}")
-    for name in ("crop_min", "crop_max", "approach"):
+    for name in QUERY_VECTORS:
         if message.HasField(name):
             data[name] = vector_text(getattr(message, name))
     return data
@@ -184,19 +189,11 @@ def grasp_result_message(result: GraspResult) -> pb.GraspResult:
 def grasp_query_message(session_id: str, query: GraspQuery) -> pb.GraspQuery:
     """A validated ``GraspQuery`` as the request for ``session_id``; unset options stay unset."""
     message = pb.GraspQuery(session_id=session_id, planner=PLANNERS[query.planner])
-    for name in ("threshold", "max_grasps", "max_approach_angle"):
+    for name in QUERY_SCALARS:  # a switch that is off is sent too: unset is the service's default
         if getattr(query, name) is not None:
             setattr(message, name, getattr(query, name))
-    message.nms_size = query.nms_size
-    for switch in SWITCHES:  # unset means the service's default, so off is sent too
-        if getattr(query, switch) is not None:
-            setattr(message, switch, getattr(query, switch))
-    crop_min, crop_max = query.crop_box or (None, None)
-    for name, values in (
-        ("crop_min", crop_min),
-        ("crop_max", crop_max),
-        ("approach", query.approach_direction),
-    ):
+    for name in QUERY_VECTORS:
+        values = query.vector(name)
         if values is not None:
             getattr(message, name).CopyFrom(vector3(values))
     return message
