@@ -300,7 +300,8 @@ class BridgeNode(Node):
     def _publish(self, grasps: list[Grasp]) -> None:
         frame, stamp = self.settings.world_frame, self.get_clock().now().to_msg()
         self._grasps.publish(outputs.pose_array(grasps, frame, stamp))
-        self._scores.publish(outputs.scores(grasps))
+        # In continuous mode every message has the track id column, NaN for ~/plan's grasps.
+        self._scores.publish(outputs.scores(grasps, track_ids=self.settings.continuous))
         self._markers.publish(outputs.markers(grasps, frame, stamp))
 
     def close(self) -> None:

@@ -216,11 +216,12 @@ def _status_says(graph: Graph, bridge: Bridge, words: str, timeout: float = 30) 
 
 
 def _published(got: dict[str, object]) -> np.ndarray | None:
-    """[x, y, z, qx, qy, qz, qw, quality, width] per published grasp; None before both topics
-    have a message of the same plan."""
+    """[x, y, z, qx, qy, qz, qw, quality, width(, track_id)] per published grasp, as many score
+    columns as the layout says; None before both topics have a message of the same plan."""
     if "poses" not in got or "scores" not in got:
         return None
-    poses, scores = got["poses"].poses, np.reshape(got["scores"].data, (-1, 2))
+    columns = got["scores"].layout.dim[1].size
+    poses, scores = got["poses"].poses, np.reshape(got["scores"].data, (-1, columns))
     if len(poses) != len(scores):
         return None
     rows = [[p.position.x, p.position.y, p.position.z] for p in poses]
@@ -232,8 +233,9 @@ def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
     service, graph, start, scene, vgn
 ):
     """With ``continuous`` the grasps after every fused frame are published, over a Track
-    stream; after the last frame they are what the Python client plans on the same frames, and a
-    reset ends the stream, clears the grasps and the next frame opens a new one."""
+    stream; after the last frame they are what the Python client's own Track stream plans on the
+    same frames, track ids included, and a reset ends the stream, clears the grasps and the next
+    frame opens a new one, whose ids start again."""
     camera, workspace = _camera(scene), _workspace(scene)
     session_id = f"ros-{uuid.uuid4().hex}"
     bridge, publisher = start(
@@ -259,12 +261,13 @@ def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
 
     with connect(service.grpc_url) as python:
         own = python.create_session(workspace=workspace).session_id
-        for depth, pose in zip(depths, poses, strict=True):
-            python.add_frame(own, depth, pose, camera)
-        expected = python.grasps(own, **GRASP_OPTIONS).grasps
+        frames = zip(depths, poses, strict=True)
+        expected = list(python.track(own, frames, intrinsics=camera, **GRASP_OPTIONS))[-1].grasps
+        planned = python.grasps(own, **GRASP_OPTIONS).grasps
         python.delete_session(own)
     assert expected, "the sample scene has grasps"
-    wanted = np.array([[*g.position, *g.orientation, g.quality, g.width] for g in expected])
+    assert [g.position for g in expected] == [g.position for g in planned], "a stream plans as GetGrasps"
+    wanted = np.array([[*g.position, *g.orientation, g.quality, g.width, g.track_id] for g in expected])
 
     def published_wanted() -> bool:
         published = _published(got)
@@ -289,6 +292,12 @@ def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
     publisher.publish(depths[0], poses[0], camera, at=2000.0)
     _status_says(graph, bridge, "5 plans published, the last")
     assert "grasps from 1 fused frames" in _status_says(graph, bridge, "5 fused, 0 refused")
+    fresh = graph.spin_until(
+        lambda: (published := _published(got)) is not None and len(published) > 0 and [published],
+        10,
+        "the new stream's grasps were not published",
+    )[0]
+    assert fresh[:, -1].tolist() == list(range(1, len(fresh) + 1)), "a new stream numbers its grasps anew"
     assert _frames(vgn, session_id) == 1
     assert "Traceback" not in bridge.text()
 

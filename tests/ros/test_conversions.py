@@ -164,6 +164,21 @@ def test_grasps_become_poses_scores_and_outlines_best_first():
     assert np.allclose(points[0], [0.1, 0.2 - 0.02, 0.3 + 0.05]), "a fingertip, 5 cm along the approach"
 
 
+def test_a_streams_scores_carry_each_grasps_track_id_third():
+    tracked = [g.model_copy(update={"track_id": i}) for g, i in zip(GRASPS, (7, 2**24 + 3), strict=True)]
+    scores = outputs.scores([*tracked, GRASPS[0]], track_ids=True)
+    rows = np.reshape(scores.data, (3, 3))
+    assert np.allclose(rows[:2], [[0.9, 0.04, 7], [0.2, 0.06, 3]]), "ids modulo 2**24, exact in float32"
+    assert np.isnan(rows[2, 2]), "a grasp planned outside the stream has none"
+    assert [(d.label, d.size, d.stride) for d in scores.layout.dim] == [
+        ("grasp", 3, 9),
+        ("quality_width_track_id", 3, 3),
+    ]
+    empty = outputs.scores([], track_ids=True)
+    assert empty.data.tolist() == [] and [d.size for d in empty.layout.dim] == [0, 3]
+    assert outputs.scores(tracked).layout.dim[1].label == "quality_width", "no id column outside a stream"
+
+
 def _parameters(**changes):
     values = {
         name: None if isinstance(default, Parameter.Type) else default
