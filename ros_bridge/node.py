@@ -225,9 +225,13 @@ class BridgeNode(Node):
         """The session frames go to, opened on first use (the service may come up after the node)."""
         if self._session is None:
             s = self.settings
-            opened = self._client.create_session(session_id=s.session_id, workspace=s.workspace)
+            opened = self._client.create_session(
+                session_id=s.session_id, workspace=s.workspace, gripper=s.gripper
+            )
             self._session = opened.session_id
-            self.get_logger().info(f"opened session {self._session} on {s.service_url}")
+            self.get_logger().info(
+                f"opened session {self._session} for the {opened.gripper} hand on {s.service_url}"
+            )
         return self._session
 
     def _service_problem(self, error: Exception, what: str) -> Refused:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -16,6 +17,7 @@ from rclpy.parameter import Parameter
 from client.connect import is_grpc_url
 from client.http import grasp_query
 from ros_bridge.convert import fixed_pose
+from vgn_contract.gripper_description import NAME_PATTERN
 from vgn_contract.schemas import SWITCHES, Pose, Workspace
 
 if TYPE_CHECKING:
@@ -34,6 +36,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "api_key": ("", "the service's API key; empty: $VGN_API_KEY or none"),
     "timeout": (30.0, "seconds a call to the service may take"),
     "session_id": ("", "the session to open on the service; empty: one the client picks"),
+    "gripper": (
+        "",
+        "the hand the session plans for (the service lists its hands); empty: the service's default",
+    ),
     "workspace.size": (0.30, "side of the workspace cube (m)"),
     "workspace.resolution": (40, "voxels a side"),
     "workspace.position": (
@@ -91,6 +97,7 @@ class Settings:
     api_key: str | None
     timeout: float
     session_id: str | None
+    gripper: str | None
     workspace: Workspace
     world_frame: str
     pose_source: str
@@ -173,6 +180,7 @@ def settings_from(values: dict[str, Any]) -> Settings:
         api_key=values["api_key"] or os.environ.get("VGN_API_KEY") or None,
         timeout=float(values["timeout"]),
         session_id=values["session_id"] or None,
+        gripper=_gripper(values["gripper"]),
         workspace=workspace,
         world_frame=values["world_frame"],
         pose_source=_pose_source(values["pose_source"], fixed),
@@ -186,6 +194,16 @@ def settings_from(values: dict[str, Any]) -> Settings:
         grasp_options=_grasp_options(values),
         continuous=bool(values["continuous"]),
     )
+
+
+def _gripper(value: str) -> str | None:
+    """A hand's name, or None (empty) for the service's default. A malformed name stops the node
+    at start; one the service does not know is the service's to refuse, naming those it knows."""
+    if not value:
+        return None
+    if not re.fullmatch(NAME_PATTERN, value):
+        raise ValueError(f"gripper must be a hand's name ({NAME_PATTERN}), got {value!r}")
+    return value
 
 
 def _number(name: str, value: float, zero_allowed: bool) -> None:

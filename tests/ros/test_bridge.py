@@ -28,14 +28,17 @@ ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "examples" / "sample_scene.npz"
 PARAMETERS_FILE = ROOT / "examples" / "ros2" / "vgn_bridge.yaml"
 GRASP_OPTIONS = {"max_grasps": 5}
+OTHER_HAND = "robotiq-2f85"
 
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedService]:
-    """The packaged model behind HTTP and gRPC, as `vgn-client serve` runs it."""
+    """The packaged model behind HTTP and gRPC, as `vgn-client serve` runs it, told that it
+    serves a second built-in hand too (for the gripper parameter; franka stays the default)."""
     log = tmp_path_factory.mktemp("ros") / "service.log"
-    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP")
-    with EmbeddedService(env={"VGN_TORCH_THREADS": "1"}, unset=unset, log_path=log, grpc=True) as running:
+    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP", "VGN_GRIPPERS")
+    env = {"VGN_TORCH_THREADS": "1", "VGN_NETWORK_GRIPPERS": f'["franka", "{OTHER_HAND}"]'}
+    with EmbeddedService(env=env, unset=unset, log_path=log, grpc=True) as running:
         yield running
 
 
@@ -398,6 +401,27 @@ def test_bad_input_is_logged_once_and_nothing_is_fused(problem, words, service, 
     assert _frames(vgn, session_id) == 0
 
 
+def test_the_session_plans_for_the_gripper_parameters_hand(service, graph, start, scene, vgn):
+    session_id = f"ros-{uuid.uuid4().hex}"
+    camera = _camera(scene)
+    bridge, publisher = start(
+        camera, wait=5.0, service_url=service.url, session_id=session_id, gripper=OTHER_HAND
+    )
+    publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], camera, at=10.0)
+    graph.spin_until(lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused", log=bridge.text)
+    assert vgn.session(session_id).gripper == OTHER_HAND
+    assert f"opened session {session_id} for the {OTHER_HAND} hand" in bridge.text()
+
+
+def test_a_hand_the_service_does_not_know_is_logged_once_and_nothing_is_fused(service, graph, start, scene):
+    bridge, publisher = start(_camera(scene), service_url=service.url, gripper="schunk-egp")
+    for at in (10.0, 11.0):
+        publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at)
+    assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
+    _assert_logged_once(bridge, "unknown gripper 'schunk-egp'; this service knows: franka")
+    assert "opened session" not in bridge.text()
+
+
 def test_an_unreachable_service_is_logged_once(graph, start, scene):
     url = f"http://127.0.0.1:{free_port()}"
     bridge, publisher = start(_camera(scene), service_url=url)
@@ -415,6 +439,7 @@ def test_an_unreachable_service_is_logged_once(graph, start, scene):
     ("parameter", "value", "words"),
     [
         ("threshold", 2.0, "vgn-ros: threshold: Input should be less than or equal to 1"),
+        ("gripper", "Franka Hand", "vgn-ros: gripper must be a hand's name"),
         (
             "max_grasps",
             "many",

@@ -195,6 +195,10 @@ def test_settings_are_checked_with_the_parameter_named():
     assert settings.grasp_options == {"planner": "vgn", "max_grasps": 3, "clearance": False}
     assert settings.pose_source == "topic" and settings.workspace.size == 0.30
     assert (
+        settings.gripper is None
+        and settings_from(_parameters(gripper="robotiq-2f85")).gripper == "robotiq-2f85"
+    )
+    assert (
         settings_from(_parameters(pose_source="auto", camera_pose=[0, 0, 1, 0, 0, 0, 1])).pose_source
         == "fixed"
     )
@@ -202,6 +206,7 @@ def test_settings_are_checked_with_the_parameter_named():
         ({"service_url": "ftp://x"}, "service_url must start with http://"),
         ({"threshold": 1.5}, "threshold"),
         ({"planner": "magic"}, "planner"),
+        ({"gripper": "Franka Hand"}, "gripper must be a hand's name"),
         ({"wait": -1.0}, "wait must be a finite number at least 0"),
         ({"timeout": 0.0}, "timeout must be a finite number above 0"),
         ({"pose_source": "fixed"}, "pose_source fixed needs the camera_pose parameter"),
