@@ -13,16 +13,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
+from tests.ros import need_ros
+
+need_ros()
 
 from geometry_msgs.msg import PoseArray, PoseStamped  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Float32MultiArray  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
 from service.launch.embedded import EmbeddedService, free_port  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
 from tests.ros.graph import LATCHED, RELIABLE, Bridge, Graph, private_domain  # noqa: E402
+from vgn_contract.geometry import gripper_outline  # noqa: E402
+from vgn_contract.schemas import Grasp  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "examples" / "sample_scene.npz"
@@ -174,6 +179,9 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     graph.node.create_subscription(
         Float32MultiArray, bridge.topic("grasp_scores"), lambda m: got.update(scores=m), RELIABLE
     )
+    graph.node.create_subscription(
+        MarkerArray, bridge.topic("grasp_markers"), lambda m: got.update(markers=m), RELIABLE
+    )
     for index, (depth, pose) in enumerate(zip(depths, scene["camera_poses"], strict=True)):
         publisher.publish(depth, pose, camera, at=1000.0 + index)
         graph.spin_until(
@@ -184,7 +192,9 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
         )
     answer = graph.call(bridge.topic("plan"))
     assert answer.success, answer.message
-    graph.spin_until(lambda: "poses" in got and "scores" in got, 10, "no grasps were published")
+    graph.spin_until(
+        lambda: {"poses", "scores", "markers"} <= got.keys(), 10, "no grasps or markers were published"
+    )
 
     with connect(url) as python:
         own = python.create_session(workspace=workspace).session_id
@@ -206,6 +216,24 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     assert np.allclose(scores, [[g.quality, g.width] for g in expected], atol=1e-6)
     assert f"{len(expected)} grasps from 4 fused frames" in answer.message
     assert "4 received, 4 fused, 0 refused" in answer.message
+    _assert_outlines(got["markers"], expected)
+
+
+def _assert_outlines(markers: MarkerArray, grasps: list[Grasp]) -> None:
+    """The previous plan's outlines deleted, then each grasp's gripper outline in the world frame,
+    greener for a better grasp."""
+    clear, *outlines = markers.markers
+    assert clear.action == Marker.DELETEALL
+    assert len(outlines) == len(grasps)
+    for marker, grasp in zip(outlines, grasps, strict=True):
+        assert marker.header.frame_id == "world" and marker.type == Marker.LINE_LIST
+        drawn = np.array([[p.x, p.y, p.z] for p in marker.points])
+        outline = gripper_outline(grasp.as_matrix(), grasp.width)
+        outline = outline[~np.isnan(outline).any(axis=1)]
+        # Each drawn point is a point of the outline, and each outline point is drawn.
+        assert np.abs(drawn[:, None] - outline[None]).max(axis=2).min(axis=1).max() < 1e-6
+        assert np.abs(outline[:, None] - drawn[None]).max(axis=2).min(axis=1).max() < 1e-6
+        assert (marker.color.g >= marker.color.r) == (grasp.quality >= 0.5)
 
 
 def _status_says(graph: Graph, bridge: Bridge, words: str, timeout: float = 30) -> str:

@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
+from tests.ros import need_ros
+
+need_ros()
 
 from geometry_msgs.msg import TransformStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
