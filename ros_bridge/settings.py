@@ -74,6 +74,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         Parameter.Type.BOOL,
         "drop grasps whose fingers do not grip squarely; unset: the service's default",
     ),
+    "fuse_on_request": (
+        False,
+        "fuse only the first frame after each ~/fuse call (a wrist camera held still), not every frame",
+    ),
     "continuous": (
         False,
         "plan after every fused frame over a gRPC Track stream and publish as it goes, "
@@ -109,6 +113,7 @@ class Settings:
     max_depth: float
     reliable: bool
     grasp_options: dict[str, Any]
+    fuse_on_request: bool
     continuous: bool
 
 
@@ -159,6 +164,11 @@ def settings_from(values: dict[str, Any]) -> Settings:
         raise ValueError(
             f"continuous needs a grpc:// or grpcs:// service_url (the Track stream is gRPC only), got {url!r}"
         )
+    if values["continuous"] and values["fuse_on_request"]:
+        raise ValueError(
+            "continuous and fuse_on_request do not go together: a Track stream plans after every "
+            "frame; with fuse_on_request, call ~/fuse and then ~/plan"
+        )
     for name in ("timeout", "depth_scale", "max_depth"):
         _number(name, values[name], zero_allowed=False)
     for name in ("pose_tolerance", "wait"):
@@ -192,6 +202,7 @@ def settings_from(values: dict[str, Any]) -> Settings:
         max_depth=float(values["max_depth"]),
         reliable=bool(values["reliable"]),
         grasp_options=_grasp_options(values),
+        fuse_on_request=bool(values["fuse_on_request"]),
         continuous=bool(values["continuous"]),
     )
 

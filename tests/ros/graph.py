@@ -127,7 +127,7 @@ class Bridge:
 
     def topic(self, name: str) -> str:
         """A topic of the node (``grasps``) or of its namespace (``depth/image_rect``)."""
-        private = name in ("grasps", "grasp_scores", "grasp_markers", "plan", "reset", "status")
+        private = name in ("grasps", "grasp_scores", "grasp_markers", "plan", "reset", "status", "fuse")
         return f"{self.namespace}/vgn_bridge/{name}" if private else f"{self.namespace}/{name}"
 
     def text(self) -> str:

@@ -20,6 +20,7 @@ need_ros()
 from geometry_msgs.msg import PoseArray, PoseStamped  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Float32MultiArray  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
 from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
@@ -448,6 +449,76 @@ def test_a_hand_the_service_does_not_know_is_logged_once_and_nothing_is_fused(se
     assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
     _assert_logged_once(bridge, "unknown gripper 'schunk-egp'; this service knows: franka")
     assert "opened session" not in bridge.text()
+
+
+def _call_while_streaming(
+    graph: Graph, publisher: Camera, service: str, frame: tuple, timeout: float = 20, **image
+) -> Trigger.Response:
+    """Call a Trigger service while the camera streams ``frame`` (depth, pose, camera; ``image``
+    for ``make.image``) at 10 Hz, stamped anew each time; the answer."""
+    client = graph.node.create_client(Trigger, service)
+    graph.spin_until(client.service_is_ready, timeout, f"{service} did not come up")
+    future = client.call_async(Trigger.Request())
+    at = iter(range(100, 10_000))
+
+    def answered() -> Trigger.Response | None:
+        publisher.publish(*frame, at=float(next(at)), **image)
+        graph.spin_for(0.1)
+        return future.done() and future.result()
+
+    answer = graph.spin_until(answered, timeout, f"{service} did not answer")
+    graph.node.destroy_client(client)
+    return answer
+
+
+def test_fuse_on_request_fuses_one_frame_per_call(service, graph, start, scene, vgn):
+    """With ``fuse_on_request`` a streaming camera's frames are passed over until ``~/fuse`` is
+    called; the call fuses the first frame after it, and answers once it is fused."""
+    session_id = f"ros-{uuid.uuid4().hex}"
+    camera = _camera(scene)
+    bridge, publisher = start(
+        camera, wait=5.0, service_url=service.url, session_id=session_id, fuse_on_request=True
+    )
+    views = list(zip(scene["depth_mm"], scene["camera_poses"], strict=True))
+    for at in (10.0, 11.0):
+        publisher.publish(*views[0], camera, at)
+    _status_says(graph, bridge, "2 received, 0 fused, 0 refused")
+    assert _frames(vgn, session_id) == 0
+    for count, (depth, pose) in enumerate(views[:2], 1):
+        answer = _call_while_streaming(graph, publisher, bridge.topic("fuse"), (depth, pose, camera))
+        assert answer.success, answer.message
+        assert answer.message.startswith(f"fused the frame into session {session_id}; frames: ")
+        assert f"{count} fused, 0 refused" in answer.message
+        assert _frames(vgn, session_id) == count, "one frame per call, however many the camera sent"
+    graph.spin_for(0.5)
+    assert _frames(vgn, session_id) == 2
+
+
+def test_a_fuse_call_answers_why_its_frame_was_not_fused(service, graph, start, scene, vgn):
+    camera = _camera(scene)
+    session_id = f"ros-{uuid.uuid4().hex}"
+    bridge, publisher = start(
+        camera, service_url=service.url, session_id=session_id, fuse_on_request=True, timeout=1.0
+    )
+    depth, pose = scene["depth_mm"][0], scene["camera_poses"][0]
+    answer = graph.call(bridge.topic("fuse"))  # the camera sends nothing
+    assert not answer.success
+    assert answer.message.startswith(
+        f"no depth image arrived on {bridge.topic('depth/image_rect')} within 1 s"
+    )
+    bad = _call_while_streaming(
+        graph, publisher, bridge.topic("fuse"), (depth, pose, camera), encoding="rgb8"
+    )
+    assert not bad.success
+    assert bad.message.startswith("the frame was not fused: depth image encoding 'rgb8' is not supported")
+    assert "1 refused" in bad.message
+    assert _frames(vgn, session_id) == 0
+
+
+def test_fuse_answers_that_every_frame_is_fused_without_fuse_on_request(service, graph, start, scene):
+    bridge, _ = start(_camera(scene), service_url=service.url)
+    answer = graph.call(bridge.topic("fuse"))
+    assert not answer.success and "every frame is fused as it arrives" in answer.message
 
 
 def test_an_unreachable_service_is_logged_once(graph, start, scene):

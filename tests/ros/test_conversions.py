@@ -218,6 +218,10 @@ def test_settings_are_checked_with_the_parameter_named():
             {"continuous": True, "service_url": "http://robot:8000"},
             "continuous needs a grpc:// or grpcs:// service_url",
         ),
+        (
+            {"continuous": True, "fuse_on_request": True, "service_url": "grpc://robot:50051"},
+            "continuous and fuse_on_request do not go together",
+        ),
     ]:
         with pytest.raises(ValueError, match=words):
             settings_from(_parameters(**changes))
