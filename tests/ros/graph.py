@@ -105,7 +105,12 @@ class Bridge:
     path, so the script runs what is tested."""
 
     def __init__(
-        self, namespace: str, parameters: dict[str, Any], log: Path, params_file: Path | None = None
+        self,
+        namespace: str,
+        parameters: dict[str, Any],
+        log: Path,
+        params_file: Path | None = None,
+        env: dict[str, str] | None = None,
     ) -> None:
         self.namespace, self.log = namespace, log
         command = (
@@ -118,7 +123,12 @@ class Bridge:
             args += ["--params-file", str(params_file)]
         for name, value in parameters.items():
             args += ["-p", f"{name}:={_yaml(value)}"]
-        env = {**os.environ, "RCUTILS_LOGGING_BUFFERED_STREAM": "0", "RCUTILS_COLORIZED_OUTPUT": "0"}
+        env = {
+            **os.environ,
+            **(env or {}),
+            "RCUTILS_LOGGING_BUFFERED_STREAM": "0",
+            "RCUTILS_COLORIZED_OUTPUT": "0",
+        }
         env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
         self._out = log.open("wb")
         self.process = subprocess.Popen(

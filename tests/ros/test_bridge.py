@@ -25,6 +25,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
 from service.launch.embedded import EmbeddedService, free_port  # noqa: E402
+from tests.client.test_client_light import GRPC, HEAVY, _blocked_env  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
 from tests.ros.graph import LATCHED, RELIABLE, Bridge, Graph, private_domain  # noqa: E402
 from vgn_contract.geometry import gripper_outline  # noqa: E402
@@ -119,11 +120,15 @@ def start(graph: Graph, tmp_path: Path) -> Iterator:
     running: list[tuple[Bridge, Camera]] = []
 
     def start(
-        camera: Intrinsics | None, params_file: Path | None = None, **parameters: object
+        camera: Intrinsics | None,
+        params_file: Path | None = None,
+        env: dict[str, str] | None = None,
+        **parameters: object,
     ) -> tuple[Bridge, Camera]:
         namespace = f"/vgn_test_{uuid.uuid4().hex[:8]}"
         defaults = {"pose_source": "topic", "reliable": True, "wait": 0.3, "timeout": 5.0}
-        bridge = Bridge(namespace, defaults | parameters, tmp_path / f"{namespace[1:]}.log", params_file)
+        log = tmp_path / f"{namespace[1:]}.log"
+        bridge = Bridge(namespace, defaults | parameters, log, params_file, env)
         try:
             publisher = Camera(graph, bridge, camera)
         except TimeoutError as error:
@@ -553,12 +558,15 @@ def test_a_bad_parameter_stops_the_node_with_its_name(parameter, value, words, g
     assert words in bridge.text()
 
 
-def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn):
-    """docs/ros2.md's parameters file, with the test's service and session on top."""
+def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn, tmp_path):
+    """docs/ros2.md's parameters file, with the test's service and session on top, on what
+    `pip install ".[ros]"` installs: the server's packages, torch, open3d and grpcio cannot be
+    imported by the node."""
     session_id = f"ros-{uuid.uuid4().hex}"
     bridge, publisher = start(
         _camera(scene),
         PARAMETERS_FILE,
+        _blocked_env(tmp_path, HEAVY + GRPC, allowed=("service.launch",)),
         wait=5.0,  # a loaded machine may deliver the pose after the image: the frame waits for it
         service_url=service.url,
         session_id=session_id,
