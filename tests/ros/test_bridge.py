@@ -224,6 +224,15 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     assert "4 received, 4 fused, 0 refused" in answer.message
     _assert_outlines(got["markers"], expected)
 
+    reset = graph.call(bridge.topic("reset"))
+    assert reset.success and reset.message == f"session {session_id} emptied"
+    graph.spin_until(
+        lambda: not got["poses"].poses and len(got["markers"].markers) == 1,
+        10,
+        "the reset did not clear the grasps and markers",
+    )
+    assert _frames(vgn, session_id) == 0
+
 
 def _assert_outlines(markers: MarkerArray, grasps: list[Grasp]) -> None:
     """The previous plan's outlines deleted, then each grasp's gripper outline in the world frame,
