@@ -387,6 +387,33 @@ def test_a_dropped_track_stream_is_logged_once_and_opened_again(graph, start, sc
         own.stop()
 
 
+def test_the_api_key_parameter_reaches_a_service_that_asks_for_one(graph, start, scene, tmp_path):
+    """A wrong key is logged once as the service's refusal and nothing is fused; the right one fuses."""
+    keyed = EmbeddedService(
+        env={"VGN_TORCH_THREADS": "1", "VGN_API_KEY": "right-key"},
+        unset=("VGN_MODEL",),
+        log_path=tmp_path / "keyed.log",
+    ).start()
+    try:
+        camera, depth, pose = _camera(scene), scene["depth_mm"][0], scene["camera_poses"][0]
+        wrong, publisher = start(camera, service_url=keyed.url, api_key="wrong-key")
+        for at in (10.0, 11.0):
+            publisher.publish(depth, pose, camera, at)
+        assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, wrong)
+        _assert_logged_once(wrong, f"the service at {keyed.url} did not fuse the frame: Unauthorized")
+        session_id = f"ros-{uuid.uuid4().hex}"
+        right, publisher = start(
+            camera, wait=5.0, service_url=keyed.url, api_key="right-key", session_id=session_id
+        )
+        publisher.publish(depth, pose, camera, at=10.0)
+        with VGNClient(keyed.url, api_key="right-key") as vgn:
+            graph.spin_until(
+                lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused", log=right.text
+            )
+    finally:
+        keyed.stop()
+
+
 def test_continuous_planning_needs_a_grpc_url(graph, tmp_path):
     parameters = {"continuous": True, "service_url": f"http://127.0.0.1:{free_port()}"}
     bridge = Bridge("/vgn_test_http", parameters, tmp_path / "http.log")
