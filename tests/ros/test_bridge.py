@@ -396,7 +396,7 @@ def test_the_api_key_parameter_reaches_a_service_that_asks_for_one(graph, start,
     ).start()
     try:
         camera, depth, pose = _camera(scene), scene["depth_mm"][0], scene["camera_poses"][0]
-        wrong, publisher = start(camera, service_url=keyed.url, api_key="wrong-key")
+        wrong, publisher = start(camera, wait=5.0, service_url=keyed.url, api_key="wrong-key")
         for at in (10.0, 11.0):
             publisher.publish(depth, pose, camera, at)
         assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, wrong)
@@ -484,7 +484,8 @@ def test_the_session_plans_for_the_gripper_parameters_hand(service, graph, start
 
 
 def test_a_hand_the_service_does_not_know_is_logged_once_and_nothing_is_fused(service, graph, start, scene):
-    bridge, publisher = start(_camera(scene), service_url=service.url, gripper="schunk-egp")
+    # wait: a loaded machine may deliver a pose after its image, and this frame is to reach the service.
+    bridge, publisher = start(_camera(scene), wait=5.0, service_url=service.url, gripper="schunk-egp")
     for at in (10.0, 11.0):
         publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at)
     assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
@@ -564,7 +565,7 @@ def test_fuse_answers_that_every_frame_is_fused_without_fuse_on_request(service,
 
 def test_an_unreachable_service_is_logged_once(graph, start, scene):
     url = f"http://127.0.0.1:{free_port()}"
-    bridge, publisher = start(_camera(scene), service_url=url)
+    bridge, publisher = start(_camera(scene), wait=5.0, service_url=url)  # the frames reach the service call
     for at in (10.0, 11.0):
         publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at)
     assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
