@@ -68,9 +68,10 @@ fi
 # (find-links, as on our development machines) it takes that; elsewhere add
 # PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu to get the CPU build, not CUDA.
 # ray and runtimes: the --ray tests and the runtime comparison's tests run in CI too; docs: CI
-# builds the documentation site (mkdocs build --strict); ros: the ROS 2 bridge's tests (tests/ros/).
+# builds the documentation site (mkdocs build --strict); ros: the ROS 2 bridge's tests (tests/ros/);
+# realsense: the RealSense capture example's test (tests/test_docs_examples.py), without a camera.
 if [ "$dev" = 1 ]; then
-  lock=requirements/full.txt extras=all,dev,docs,ray,runtimes,ros
+  lock=requirements/full.txt extras=all,dev,docs,ray,runtimes,ros,realsense
 else
   lock=requirements/main.txt extras=service,sim
 fi

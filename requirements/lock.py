@@ -41,7 +41,7 @@ PLATFORM_TEXT = "Linux x86-64 (manylinux_2_35: glibc >= 2.35), CPython 3.11"
 # Lock file -> the extras it covers. Order matters: the test set is resolved first and constrains
 # the others, so the packages they share have the same versions.
 LOCKS: dict[str, tuple[str, ...]] = {
-    "full.txt": ("all", "dev", "docs", "ray", "runtimes", "ros"),
+    "full.txt": ("all", "dev", "docs", "ray", "runtimes", "ros", "realsense"),
     "main.txt": ("service", "sim"),
 }
 FULL = "full.txt"

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import queue
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import httpx
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.task import Future
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import Float32MultiArray
 from std_srvs.srv import Trigger
@@ -44,9 +47,20 @@ LATCHED = QoSProfile(
 POLL_PERIOD = 0.05
 
 
+@dataclass
+class _FuseCall:
+    """A ``~/fuse`` call waiting for its frame: ``answer`` gets (success, message) once the first
+    image after the call is fused or refused, or none came by ``deadline`` (monotonic s)."""
+
+    answer: Future
+    deadline: float
+    taken: bool = False  # its image has arrived; later ones are passed over
+
+
 class BridgeNode(Node):
     """Fuses each depth frame into one service session; ``~/plan`` publishes the ranked grasps,
-    ``~/reset`` empties the session, ``~/status`` says what the bridge has. With ``continuous``
+    ``~/reset`` empties the session, ``~/status`` says what the bridge has. With
+    ``fuse_on_request`` only the frame after each ``~/fuse`` call is fused. With ``continuous``
     the frames go through a gRPC ``Track`` stream instead, and the grasps planned after each are
     published as they come. ``ValueError`` at construction names a bad parameter."""
 
@@ -66,6 +80,7 @@ class BridgeNode(Node):
         self._last_plan: GraspResult | None = None
         self._tracking = False  # a stream has planned since the start or since one failed
         self._topic_poses: TopicPoses | None = None
+        self._fuse_call: _FuseCall | None = None
         info_topic = self.resolve_topic_name(INFO_TOPIC)
         self._frames = FrameAssembler(self._pose_source(), info_topic, self.settings.wait)
         camera_qos = qos_profile_sensor_data
@@ -79,6 +94,10 @@ class BridgeNode(Node):
         self.create_service(Trigger, "~/plan", self._plan)
         self.create_service(Trigger, "~/reset", self._reset)
         self.create_service(Trigger, "~/status", self._report_status)
+        # A group of its own: the call waits for a frame, and the camera's callbacks must run meanwhile.
+        self.create_service(
+            Trigger, "~/fuse", self._fuse_next_frame, callback_group=MutuallyExclusiveCallbackGroup()
+        )
         self.create_timer(POLL_PERIOD, self._poll)
         if s.continuous:
             self._track = self._open_track()
@@ -144,9 +163,18 @@ class BridgeNode(Node):
 
     def _on_image(self, msg: Image) -> None:
         self.counts["received"] += 1
+        if self.settings.fuse_on_request:
+            call = self._fuse_call
+            if call is None or call.taken:
+                return  # passed over: only the first image after a ~/fuse call is fused
+            call.taken = True
         self._handle(self._frames.add(msg, time.monotonic()))
 
     def _poll(self) -> None:
+        call = self._fuse_call
+        if call is not None and not call.taken and time.monotonic() > call.deadline:
+            topic = self.resolve_topic_name(IMAGE_TOPIC)
+            self._answer_fuse(False, f"no depth image arrived on {topic} within {self.settings.timeout:g} s")
         self._handle(self._frames.poll(time.monotonic()))
 
     def _handle(self, decided: list[Frame | Refused]) -> None:
@@ -159,6 +187,7 @@ class BridgeNode(Node):
     def _refuse(self, problem: Refused) -> None:
         self.counts["refused"] += 1
         self._complaints.report(problem)
+        self._answer_fuse(False, f"the frame was not fused: {problem}")
 
     def _fuse(self, frame: Frame) -> None:
         s = self.settings
@@ -175,6 +204,32 @@ class BridgeNode(Node):
             return
         self.counts["fused"] += 1
         self._complaints.clear()
+        self._answer_fuse(True, f"fused the frame into session {session}")
+
+    # Fusing on request.
+
+    async def _fuse_next_frame(
+        self, request: Trigger.Request, response: Trigger.Response
+    ) -> Trigger.Response:
+        """``~/fuse``: fuse the first image that arrives after the call, and answer once it is
+        fused or refused (a wrist camera's frame taken with the arm held still)."""
+        if not self.settings.fuse_on_request:
+            response.success = False
+            response.message = "every frame is fused as it arrives: fuse_on_request makes ~/fuse pick them"
+            return response
+        if self._fuse_call is not None:
+            response.success, response.message = False, "another ~/fuse call is waiting for its frame"
+            return response
+        call = self._fuse_call = _FuseCall(Future(), time.monotonic() + self.settings.timeout)
+        response.success, message = await call.answer
+        response.message = f"{message}; {self._counts()}"
+        return response
+
+    def _answer_fuse(self, success: bool, message: str) -> None:
+        """Answer the waiting ``~/fuse`` call, if any, once its frame is decided."""
+        call, self._fuse_call = self._fuse_call, None
+        if call is not None:
+            call.answer.set_result((success, message))
 
     # Planning continuously.
 
@@ -225,9 +280,13 @@ class BridgeNode(Node):
         """The session frames go to, opened on first use (the service may come up after the node)."""
         if self._session is None:
             s = self.settings
-            opened = self._client.create_session(session_id=s.session_id, workspace=s.workspace)
+            opened = self._client.create_session(
+                session_id=s.session_id, workspace=s.workspace, gripper=s.gripper
+            )
             self._session = opened.session_id
-            self.get_logger().info(f"opened session {self._session} on {s.service_url}")
+            self.get_logger().info(
+                f"opened session {self._session} for the {opened.gripper} hand on {s.service_url}"
+            )
         return self._session
 
     def _service_problem(self, error: Exception, what: str) -> Refused:
@@ -300,7 +359,8 @@ class BridgeNode(Node):
     def _publish(self, grasps: list[Grasp]) -> None:
         frame, stamp = self.settings.world_frame, self.get_clock().now().to_msg()
         self._grasps.publish(outputs.pose_array(grasps, frame, stamp))
-        self._scores.publish(outputs.scores(grasps))
+        # In continuous mode every message has the track id column, NaN for ~/plan's grasps.
+        self._scores.publish(outputs.scores(grasps, track_ids=self.settings.continuous))
         self._markers.publish(outputs.markers(grasps, frame, stamp))
 
     def close(self) -> None:

@@ -3,6 +3,7 @@ gripper outlines for RViz. Index i of each message is the i-th best grasp."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -17,6 +18,9 @@ from vgn_contract.schemas import Grasp
 
 #: Line width of the drawn gripper outlines (metres).
 LINE_WIDTH = 0.002
+#: Track ids go out modulo this: float32 holds every integer below it exactly, so an id on
+#: ``~/grasp_scores`` repeats only after this many newer tracks of the same stream.
+TRACK_ID_MODULUS = 2**24
 
 
 def pose_array(grasps: Sequence[Grasp], frame_id: str, stamp: Time) -> PoseArray:
@@ -31,14 +35,24 @@ def pose_array(grasps: Sequence[Grasp], frame_id: str, stamp: Time) -> PoseArray
     return PoseArray(header=Header(frame_id=frame_id, stamp=stamp), poses=poses)
 
 
-def scores(grasps: Sequence[Grasp]) -> Float32MultiArray:
-    """An (n, 2) array of [quality, width (m)] per grasp, in the order of ``pose_array``."""
-    msg = Float32MultiArray(data=[float(v) for grasp in grasps for v in (grasp.quality, grasp.width)])
+def scores(grasps: Sequence[Grasp], track_ids: bool = False) -> Float32MultiArray:
+    """An (n, 2) array of [quality, width (m)] per grasp, in the order of ``pose_array``; with
+    ``track_ids`` (a Track stream's grasps) an (n, 3) array, each grasp's ``track_id`` third so
+    that a closed loop can follow one grasp from plan to plan. The id is taken modulo
+    ``TRACK_ID_MODULUS``, which float32 holds exactly; NaN for a grasp without one."""
+    columns = ("quality", "width", "track_id") if track_ids else ("quality", "width")
+    rows = [[grasp.quality, grasp.width] + ([_track_id(grasp)] if track_ids else []) for grasp in grasps]
+    msg = Float32MultiArray(data=[float(v) for row in rows for v in row])
+    width = len(columns)
     msg.layout.dim = [
-        MultiArrayDimension(label="grasp", size=len(grasps), stride=2 * len(grasps)),
-        MultiArrayDimension(label="quality_width", size=2, stride=2),
+        MultiArrayDimension(label="grasp", size=len(grasps), stride=width * len(grasps)),
+        MultiArrayDimension(label="_".join(columns), size=width, stride=width),
     ]
     return msg
+
+
+def _track_id(grasp: Grasp) -> float:
+    return math.nan if grasp.track_id is None else float(grasp.track_id % TRACK_ID_MODULUS)
 
 
 def quality_colour(quality: float) -> ColorRGBA:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib.util
 import math
 import os
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -16,6 +17,7 @@ from rclpy.parameter import Parameter
 from client.connect import is_grpc_url
 from client.http import grasp_query
 from ros_bridge.convert import fixed_pose
+from vgn_contract.gripper_description import NAME_PATTERN
 from vgn_contract.schemas import SWITCHES, Pose, Workspace
 
 if TYPE_CHECKING:
@@ -34,6 +36,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "api_key": ("", "the service's API key; empty: $VGN_API_KEY or none"),
     "timeout": (30.0, "seconds a call to the service may take"),
     "session_id": ("", "the session to open on the service; empty: one the client picks"),
+    "gripper": (
+        "",
+        "the hand the session plans for (the service lists its hands); empty: the service's default",
+    ),
     "workspace.size": (0.30, "side of the workspace cube (m)"),
     "workspace.resolution": (40, "voxels a side"),
     "workspace.position": (
@@ -68,6 +74,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
         Parameter.Type.BOOL,
         "drop grasps whose fingers do not grip squarely; unset: the service's default",
     ),
+    "fuse_on_request": (
+        False,
+        "fuse only the first frame after each ~/fuse call (a wrist camera held still), not every frame",
+    ),
     "continuous": (
         False,
         "plan after every fused frame over a gRPC Track stream and publish as it goes, "
@@ -91,6 +101,7 @@ class Settings:
     api_key: str | None
     timeout: float
     session_id: str | None
+    gripper: str | None
     workspace: Workspace
     world_frame: str
     pose_source: str
@@ -102,6 +113,7 @@ class Settings:
     max_depth: float
     reliable: bool
     grasp_options: dict[str, Any]
+    fuse_on_request: bool
     continuous: bool
 
 
@@ -152,6 +164,11 @@ def settings_from(values: dict[str, Any]) -> Settings:
         raise ValueError(
             f"continuous needs a grpc:// or grpcs:// service_url (the Track stream is gRPC only), got {url!r}"
         )
+    if values["continuous"] and values["fuse_on_request"]:
+        raise ValueError(
+            "continuous and fuse_on_request do not go together: a Track stream plans after every "
+            "frame; with fuse_on_request, call ~/fuse and then ~/plan"
+        )
     for name in ("timeout", "depth_scale", "max_depth"):
         _number(name, values[name], zero_allowed=False)
     for name in ("pose_tolerance", "wait"):
@@ -173,6 +190,7 @@ def settings_from(values: dict[str, Any]) -> Settings:
         api_key=values["api_key"] or os.environ.get("VGN_API_KEY") or None,
         timeout=float(values["timeout"]),
         session_id=values["session_id"] or None,
+        gripper=_gripper(values["gripper"]),
         workspace=workspace,
         world_frame=values["world_frame"],
         pose_source=_pose_source(values["pose_source"], fixed),
@@ -184,8 +202,19 @@ def settings_from(values: dict[str, Any]) -> Settings:
         max_depth=float(values["max_depth"]),
         reliable=bool(values["reliable"]),
         grasp_options=_grasp_options(values),
+        fuse_on_request=bool(values["fuse_on_request"]),
         continuous=bool(values["continuous"]),
     )
+
+
+def _gripper(value: str) -> str | None:
+    """A hand's name, or None (empty) for the service's default. A malformed name stops the node
+    at start; one the service does not know is the service's to refuse, naming those it knows."""
+    if not value:
+        return None
+    if not re.fullmatch(NAME_PATTERN, value):
+        raise ValueError(f"gripper must be a hand's name ({NAME_PATTERN}), got {value!r}")
+    return value
 
 
 def _number(name: str, value: float, zero_allowed: bool) -> None:

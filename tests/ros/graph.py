@@ -23,6 +23,9 @@ from std_srvs.srv import Trigger
 from service.launch.lifetime import ending_with_this_process
 
 ROOT = Path(__file__).resolve().parents[2]
+#: The console script an install puts beside this Python (CI's editable install has it); where it
+#: is missing, ``python -m ros_bridge`` runs the same ``main``.
+VGN_ROS = Path(sys.executable).with_name("vgn-ros")
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 #: A subscriber that gets the bridge's last plan on joining, as RViz set to Transient Local does.
 LATCHED = QoSProfile(
@@ -98,18 +101,34 @@ class Graph:
 
 
 class Bridge:
-    """``python -m ros_bridge`` (what ``vgn-ros`` runs) under ``namespace``, logging to a file."""
+    """``vgn-ros`` under ``namespace``, logging to a file; the checkout's code comes first on its
+    path, so the script runs what is tested."""
 
     def __init__(
-        self, namespace: str, parameters: dict[str, Any], log: Path, params_file: Path | None = None
+        self,
+        namespace: str,
+        parameters: dict[str, Any],
+        log: Path,
+        params_file: Path | None = None,
+        env: dict[str, str] | None = None,
     ) -> None:
         self.namespace, self.log = namespace, log
-        args = [sys.executable, "-m", "ros_bridge", "--ros-args", "-r", f"__ns:={namespace}"]
+        command = (
+            [str(VGN_ROS)]
+            if VGN_ROS.is_file() or os.environ.get("CI")
+            else [sys.executable, "-m", "ros_bridge"]
+        )
+        args = [*command, "--ros-args", "-r", f"__ns:={namespace}"]
         if params_file is not None:
             args += ["--params-file", str(params_file)]
         for name, value in parameters.items():
             args += ["-p", f"{name}:={_yaml(value)}"]
-        env = {**os.environ, "RCUTILS_LOGGING_BUFFERED_STREAM": "0", "RCUTILS_COLORIZED_OUTPUT": "0"}
+        env = {
+            **os.environ,
+            **(env or {}),
+            "RCUTILS_LOGGING_BUFFERED_STREAM": "0",
+            "RCUTILS_COLORIZED_OUTPUT": "0",
+        }
         env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
         self._out = log.open("wb")
         self.process = subprocess.Popen(
@@ -118,7 +137,7 @@ class Bridge:
 
     def topic(self, name: str) -> str:
         """A topic of the node (``grasps``) or of its namespace (``depth/image_rect``)."""
-        private = name in ("grasps", "grasp_scores", "grasp_markers", "plan", "reset", "status")
+        private = name in ("grasps", "grasp_scores", "grasp_markers", "plan", "reset", "status", "fuse")
         return f"{self.namespace}/vgn_bridge/{name}" if private else f"{self.namespace}/{name}"
 
     def text(self) -> str:

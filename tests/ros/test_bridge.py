@@ -13,29 +13,39 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
+from tests.ros import need_ros
+
+need_ros()
 
 from geometry_msgs.msg import PoseArray, PoseStamped  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Float32MultiArray  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 
 from client import Intrinsics, NotFound, Pose, VGNClient, Workspace, connect  # noqa: E402
 from service.launch.embedded import EmbeddedService, free_port  # noqa: E402
+from tests.client.test_client_light import GRPC, HEAVY, _blocked_env  # noqa: E402
 from tests.ros import ros_messages as make  # noqa: E402
 from tests.ros.graph import LATCHED, RELIABLE, Bridge, Graph, private_domain  # noqa: E402
+from vgn_contract.geometry import gripper_outline  # noqa: E402
+from vgn_contract.schemas import Grasp  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "examples" / "sample_scene.npz"
 PARAMETERS_FILE = ROOT / "examples" / "ros2" / "vgn_bridge.yaml"
 GRASP_OPTIONS = {"max_grasps": 5}
+OTHER_HAND = "robotiq-2f85"
 
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedService]:
-    """The packaged model behind HTTP and gRPC, as `vgn-client serve` runs it."""
+    """The packaged model behind HTTP and gRPC, as `vgn-client serve` runs it, told that it
+    serves a second built-in hand too (for the gripper parameter; franka stays the default)."""
     log = tmp_path_factory.mktemp("ros") / "service.log"
-    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP")
-    with EmbeddedService(env={"VGN_TORCH_THREADS": "1"}, unset=unset, log_path=log, grpc=True) as running:
+    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP", "VGN_GRIPPERS")
+    env = {"VGN_TORCH_THREADS": "1", "VGN_NETWORK_GRIPPERS": f'["franka", "{OTHER_HAND}"]'}
+    with EmbeddedService(env=env, unset=unset, log_path=log, grpc=True) as running:
         yield running
 
 
@@ -110,11 +120,15 @@ def start(graph: Graph, tmp_path: Path) -> Iterator:
     running: list[tuple[Bridge, Camera]] = []
 
     def start(
-        camera: Intrinsics | None, params_file: Path | None = None, **parameters: object
+        camera: Intrinsics | None,
+        params_file: Path | None = None,
+        env: dict[str, str] | None = None,
+        **parameters: object,
     ) -> tuple[Bridge, Camera]:
         namespace = f"/vgn_test_{uuid.uuid4().hex[:8]}"
         defaults = {"pose_source": "topic", "reliable": True, "wait": 0.3, "timeout": 5.0}
-        bridge = Bridge(namespace, defaults | parameters, tmp_path / f"{namespace[1:]}.log", params_file)
+        log = tmp_path / f"{namespace[1:]}.log"
+        bridge = Bridge(namespace, defaults | parameters, log, params_file, env)
         try:
             publisher = Camera(graph, bridge, camera)
         except TimeoutError as error:
@@ -171,6 +185,9 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     graph.node.create_subscription(
         Float32MultiArray, bridge.topic("grasp_scores"), lambda m: got.update(scores=m), RELIABLE
     )
+    graph.node.create_subscription(
+        MarkerArray, bridge.topic("grasp_markers"), lambda m: got.update(markers=m), RELIABLE
+    )
     for index, (depth, pose) in enumerate(zip(depths, scene["camera_poses"], strict=True)):
         publisher.publish(depth, pose, camera, at=1000.0 + index)
         graph.spin_until(
@@ -181,7 +198,9 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
         )
     answer = graph.call(bridge.topic("plan"))
     assert answer.success, answer.message
-    graph.spin_until(lambda: "poses" in got and "scores" in got, 10, "no grasps were published")
+    graph.spin_until(
+        lambda: {"poses", "scores", "markers"} <= got.keys(), 10, "no grasps or markers were published"
+    )
 
     with connect(url) as python:
         own = python.create_session(workspace=workspace).session_id
@@ -203,6 +222,33 @@ def test_published_frames_give_the_grasps_the_python_client_gets(encoding, servi
     assert np.allclose(scores, [[g.quality, g.width] for g in expected], atol=1e-6)
     assert f"{len(expected)} grasps from 4 fused frames" in answer.message
     assert "4 received, 4 fused, 0 refused" in answer.message
+    _assert_outlines(got["markers"], expected)
+
+    reset = graph.call(bridge.topic("reset"))
+    assert reset.success and reset.message == f"session {session_id} emptied"
+    graph.spin_until(
+        lambda: not got["poses"].poses and len(got["markers"].markers) == 1,
+        10,
+        "the reset did not clear the grasps and markers",
+    )
+    assert _frames(vgn, session_id) == 0
+
+
+def _assert_outlines(markers: MarkerArray, grasps: list[Grasp]) -> None:
+    """The previous plan's outlines deleted, then each grasp's gripper outline in the world frame,
+    greener for a better grasp."""
+    clear, *outlines = markers.markers
+    assert clear.action == Marker.DELETEALL
+    assert len(outlines) == len(grasps)
+    for marker, grasp in zip(outlines, grasps, strict=True):
+        assert marker.header.frame_id == "world" and marker.type == Marker.LINE_LIST
+        drawn = np.array([[p.x, p.y, p.z] for p in marker.points])
+        outline = gripper_outline(grasp.as_matrix(), grasp.width)
+        outline = outline[~np.isnan(outline).any(axis=1)]
+        # Each drawn point is a point of the outline, and each outline point is drawn.
+        assert np.abs(drawn[:, None] - outline[None]).max(axis=2).min(axis=1).max() < 1e-6
+        assert np.abs(outline[:, None] - drawn[None]).max(axis=2).min(axis=1).max() < 1e-6
+        assert (marker.color.g >= marker.color.r) == (grasp.quality >= 0.5)
 
 
 def _status_says(graph: Graph, bridge: Bridge, words: str, timeout: float = 30) -> str:
@@ -216,11 +262,12 @@ def _status_says(graph: Graph, bridge: Bridge, words: str, timeout: float = 30) 
 
 
 def _published(got: dict[str, object]) -> np.ndarray | None:
-    """[x, y, z, qx, qy, qz, qw, quality, width] per published grasp; None before both topics
-    have a message of the same plan."""
+    """[x, y, z, qx, qy, qz, qw, quality, width(, track_id)] per published grasp, as many score
+    columns as the layout says; None before both topics have a message of the same plan."""
     if "poses" not in got or "scores" not in got:
         return None
-    poses, scores = got["poses"].poses, np.reshape(got["scores"].data, (-1, 2))
+    columns = got["scores"].layout.dim[1].size
+    poses, scores = got["poses"].poses, np.reshape(got["scores"].data, (-1, columns))
     if len(poses) != len(scores):
         return None
     rows = [[p.position.x, p.position.y, p.position.z] for p in poses]
@@ -232,8 +279,9 @@ def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
     service, graph, start, scene, vgn
 ):
     """With ``continuous`` the grasps after every fused frame are published, over a Track
-    stream; after the last frame they are what the Python client plans on the same frames, and a
-    reset ends the stream, clears the grasps and the next frame opens a new one."""
+    stream; after the last frame they are what the Python client's own Track stream plans on the
+    same frames, track ids included, and a reset ends the stream, clears the grasps and the next
+    frame opens a new one, whose ids start again."""
     camera, workspace = _camera(scene), _workspace(scene)
     session_id = f"ros-{uuid.uuid4().hex}"
     bridge, publisher = start(
@@ -259,12 +307,13 @@ def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
 
     with connect(service.grpc_url) as python:
         own = python.create_session(workspace=workspace).session_id
-        for depth, pose in zip(depths, poses, strict=True):
-            python.add_frame(own, depth, pose, camera)
-        expected = python.grasps(own, **GRASP_OPTIONS).grasps
+        frames = zip(depths, poses, strict=True)
+        expected = list(python.track(own, frames, intrinsics=camera, **GRASP_OPTIONS))[-1].grasps
+        planned = python.grasps(own, **GRASP_OPTIONS).grasps
         python.delete_session(own)
     assert expected, "the sample scene has grasps"
-    wanted = np.array([[*g.position, *g.orientation, g.quality, g.width] for g in expected])
+    assert [g.position for g in expected] == [g.position for g in planned], "a stream plans as GetGrasps"
+    wanted = np.array([[*g.position, *g.orientation, g.quality, g.width, g.track_id] for g in expected])
 
     def published_wanted() -> bool:
         published = _published(got)
@@ -289,6 +338,12 @@ def test_continuous_planning_publishes_the_python_clients_grasps_without_plan(
     publisher.publish(depths[0], poses[0], camera, at=2000.0)
     _status_says(graph, bridge, "5 plans published, the last")
     assert "grasps from 1 fused frames" in _status_says(graph, bridge, "5 fused, 0 refused")
+    fresh = graph.spin_until(
+        lambda: (published := _published(got)) is not None and len(published) > 0 and [published],
+        10,
+        "the new stream's grasps were not published",
+    )[0]
+    assert fresh[:, -1].tolist() == list(range(1, len(fresh) + 1)), "a new stream numbers its grasps anew"
     assert _frames(vgn, session_id) == 1
     assert "Traceback" not in bridge.text()
 
@@ -330,6 +385,33 @@ def test_a_dropped_track_stream_is_logged_once_and_opened_again(graph, start, sc
         assert "Traceback" not in bridge.text()
     finally:
         own.stop()
+
+
+def test_the_api_key_parameter_reaches_a_service_that_asks_for_one(graph, start, scene, tmp_path):
+    """A wrong key is logged once as the service's refusal and nothing is fused; the right one fuses."""
+    keyed = EmbeddedService(
+        env={"VGN_TORCH_THREADS": "1", "VGN_API_KEY": "right-key"},
+        unset=("VGN_MODEL",),
+        log_path=tmp_path / "keyed.log",
+    ).start()
+    try:
+        camera, depth, pose = _camera(scene), scene["depth_mm"][0], scene["camera_poses"][0]
+        wrong, publisher = start(camera, wait=5.0, service_url=keyed.url, api_key="wrong-key")
+        for at in (10.0, 11.0):
+            publisher.publish(depth, pose, camera, at)
+        assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, wrong)
+        _assert_logged_once(wrong, f"the service at {keyed.url} did not fuse the frame: Unauthorized")
+        session_id = f"ros-{uuid.uuid4().hex}"
+        right, publisher = start(
+            camera, wait=5.0, service_url=keyed.url, api_key="right-key", session_id=session_id
+        )
+        publisher.publish(depth, pose, camera, at=10.0)
+        with VGNClient(keyed.url, api_key="right-key") as vgn:
+            graph.spin_until(
+                lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused", log=right.text
+            )
+    finally:
+        keyed.stop()
 
 
 def test_continuous_planning_needs_a_grpc_url(graph, tmp_path):
@@ -389,9 +471,101 @@ def test_bad_input_is_logged_once_and_nothing_is_fused(problem, words, service, 
     assert _frames(vgn, session_id) == 0
 
 
+def test_the_session_plans_for_the_gripper_parameters_hand(service, graph, start, scene, vgn):
+    session_id = f"ros-{uuid.uuid4().hex}"
+    camera = _camera(scene)
+    bridge, publisher = start(
+        camera, wait=5.0, service_url=service.url, session_id=session_id, gripper=OTHER_HAND
+    )
+    publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], camera, at=10.0)
+    graph.spin_until(lambda: _frames(vgn, session_id) == 1, 30, "the frame was not fused", log=bridge.text)
+    assert vgn.session(session_id).gripper == OTHER_HAND
+    assert f"opened session {session_id} for the {OTHER_HAND} hand" in bridge.text()
+
+
+def test_a_hand_the_service_does_not_know_is_logged_once_and_nothing_is_fused(service, graph, start, scene):
+    # wait: a loaded machine may deliver a pose after its image, and this frame is to reach the service.
+    bridge, publisher = start(_camera(scene), wait=5.0, service_url=service.url, gripper="schunk-egp")
+    for at in (10.0, 11.0):
+        publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at)
+    assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
+    _assert_logged_once(bridge, "unknown gripper 'schunk-egp'; this service knows: franka")
+    assert "opened session" not in bridge.text()
+
+
+def _call_while_streaming(
+    graph: Graph, publisher: Camera, service: str, frame: tuple, timeout: float = 20, **image
+) -> Trigger.Response:
+    """Call a Trigger service while the camera streams ``frame`` (depth, pose, camera; ``image``
+    for ``make.image``) at 10 Hz, stamped anew each time; the answer."""
+    client = graph.node.create_client(Trigger, service)
+    graph.spin_until(client.service_is_ready, timeout, f"{service} did not come up")
+    future = client.call_async(Trigger.Request())
+    at = iter(range(100, 10_000))
+
+    def answered() -> Trigger.Response | None:
+        publisher.publish(*frame, at=float(next(at)), **image)
+        graph.spin_for(0.1)
+        return future.done() and future.result()
+
+    answer = graph.spin_until(answered, timeout, f"{service} did not answer")
+    graph.node.destroy_client(client)
+    return answer
+
+
+def test_fuse_on_request_fuses_one_frame_per_call(service, graph, start, scene, vgn):
+    """With ``fuse_on_request`` a streaming camera's frames are passed over until ``~/fuse`` is
+    called; the call fuses the first frame after it, and answers once it is fused."""
+    session_id = f"ros-{uuid.uuid4().hex}"
+    camera = _camera(scene)
+    bridge, publisher = start(
+        camera, wait=5.0, service_url=service.url, session_id=session_id, fuse_on_request=True
+    )
+    views = list(zip(scene["depth_mm"], scene["camera_poses"], strict=True))
+    for at in (10.0, 11.0):
+        publisher.publish(*views[0], camera, at)
+    _status_says(graph, bridge, "2 received, 0 fused, 0 refused")
+    assert _frames(vgn, session_id) == 0
+    for count, (depth, pose) in enumerate(views[:2], 1):
+        answer = _call_while_streaming(graph, publisher, bridge.topic("fuse"), (depth, pose, camera))
+        assert answer.success, answer.message
+        assert answer.message.startswith(f"fused the frame into session {session_id}; frames: ")
+        assert f"{count} fused, 0 refused" in answer.message
+        assert _frames(vgn, session_id) == count, "one frame per call, however many the camera sent"
+    graph.spin_for(0.5)
+    assert _frames(vgn, session_id) == 2
+
+
+def test_a_fuse_call_answers_why_its_frame_was_not_fused(service, graph, start, scene, vgn):
+    camera = _camera(scene)
+    session_id = f"ros-{uuid.uuid4().hex}"
+    bridge, publisher = start(
+        camera, service_url=service.url, session_id=session_id, fuse_on_request=True, timeout=1.0
+    )
+    depth, pose = scene["depth_mm"][0], scene["camera_poses"][0]
+    answer = graph.call(bridge.topic("fuse"))  # the camera sends nothing
+    assert not answer.success
+    assert answer.message.startswith(
+        f"no depth image arrived on {bridge.topic('depth/image_rect')} within 1 s"
+    )
+    bad = _call_while_streaming(
+        graph, publisher, bridge.topic("fuse"), (depth, pose, camera), encoding="rgb8"
+    )
+    assert not bad.success
+    assert bad.message.startswith("the frame was not fused: depth image encoding 'rgb8' is not supported")
+    assert "1 refused" in bad.message
+    assert _frames(vgn, session_id) == 0
+
+
+def test_fuse_answers_that_every_frame_is_fused_without_fuse_on_request(service, graph, start, scene):
+    bridge, _ = start(_camera(scene), service_url=service.url)
+    answer = graph.call(bridge.topic("fuse"))
+    assert not answer.success and "every frame is fused as it arrives" in answer.message
+
+
 def test_an_unreachable_service_is_logged_once(graph, start, scene):
     url = f"http://127.0.0.1:{free_port()}"
-    bridge, publisher = start(_camera(scene), service_url=url)
+    bridge, publisher = start(_camera(scene), wait=5.0, service_url=url)  # the frames reach the service call
     for at in (10.0, 11.0):
         publisher.publish(scene["depth_mm"][0], scene["camera_poses"][0], _camera(scene), at)
     assert "2 received, 0 fused, 2 refused" in _refused_twice(graph, bridge)
@@ -406,6 +580,7 @@ def test_an_unreachable_service_is_logged_once(graph, start, scene):
     ("parameter", "value", "words"),
     [
         ("threshold", 2.0, "vgn-ros: threshold: Input should be less than or equal to 1"),
+        ("gripper", "Franka Hand", "vgn-ros: gripper must be a hand's name"),
         (
             "max_grasps",
             "many",
@@ -420,12 +595,15 @@ def test_a_bad_parameter_stops_the_node_with_its_name(parameter, value, words, g
     assert words in bridge.text()
 
 
-def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn):
-    """docs/ros2.md's parameters file, with the test's service and session on top."""
+def test_the_example_parameters_file_configures_the_node(service, start, graph, scene, vgn, tmp_path):
+    """docs/ros2.md's parameters file, with the test's service and session on top, on what
+    `pip install ".[ros]"` installs: the server's packages, torch, open3d and grpcio cannot be
+    imported by the node."""
     session_id = f"ros-{uuid.uuid4().hex}"
     bridge, publisher = start(
         _camera(scene),
         PARAMETERS_FILE,
+        _blocked_env(tmp_path, HEAVY + GRPC, allowed=("service.launch",)),
         wait=5.0,  # a loaded machine may deliver the pose after the image: the frame waits for it
         service_url=service.url,
         session_id=session_id,

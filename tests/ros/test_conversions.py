@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
+from tests.ros import need_ros
+
+need_ros()
 
 from geometry_msgs.msg import TransformStamped  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
@@ -164,6 +166,21 @@ def test_grasps_become_poses_scores_and_outlines_best_first():
     assert np.allclose(points[0], [0.1, 0.2 - 0.02, 0.3 + 0.05]), "a fingertip, 5 cm along the approach"
 
 
+def test_a_streams_scores_carry_each_grasps_track_id_third():
+    tracked = [g.model_copy(update={"track_id": i}) for g, i in zip(GRASPS, (7, 2**24 + 3), strict=True)]
+    scores = outputs.scores([*tracked, GRASPS[0]], track_ids=True)
+    rows = np.reshape(scores.data, (3, 3))
+    assert np.allclose(rows[:2], [[0.9, 0.04, 7], [0.2, 0.06, 3]]), "ids modulo 2**24, exact in float32"
+    assert np.isnan(rows[2, 2]), "a grasp planned outside the stream has none"
+    assert [(d.label, d.size, d.stride) for d in scores.layout.dim] == [
+        ("grasp", 3, 9),
+        ("quality_width_track_id", 3, 3),
+    ]
+    empty = outputs.scores([], track_ids=True)
+    assert empty.data.tolist() == [] and [d.size for d in empty.layout.dim] == [0, 3]
+    assert outputs.scores(tracked).layout.dim[1].label == "quality_width", "no id column outside a stream"
+
+
 def _parameters(**changes):
     values = {
         name: None if isinstance(default, Parameter.Type) else default
@@ -180,6 +197,10 @@ def test_settings_are_checked_with_the_parameter_named():
     assert settings.grasp_options == {"planner": "vgn", "max_grasps": 3, "clearance": False}
     assert settings.pose_source == "topic" and settings.workspace.size == 0.30
     assert (
+        settings.gripper is None
+        and settings_from(_parameters(gripper="robotiq-2f85")).gripper == "robotiq-2f85"
+    )
+    assert (
         settings_from(_parameters(pose_source="auto", camera_pose=[0, 0, 1, 0, 0, 0, 1])).pose_source
         == "fixed"
     )
@@ -187,6 +208,7 @@ def test_settings_are_checked_with_the_parameter_named():
         ({"service_url": "ftp://x"}, "service_url must start with http://"),
         ({"threshold": 1.5}, "threshold"),
         ({"planner": "magic"}, "planner"),
+        ({"gripper": "Franka Hand"}, "gripper must be a hand's name"),
         ({"wait": -1.0}, "wait must be a finite number at least 0"),
         ({"timeout": 0.0}, "timeout must be a finite number above 0"),
         ({"pose_source": "fixed"}, "pose_source fixed needs the camera_pose parameter"),
@@ -195,6 +217,10 @@ def test_settings_are_checked_with_the_parameter_named():
         (
             {"continuous": True, "service_url": "http://robot:8000"},
             "continuous needs a grpc:// or grpcs:// service_url",
+        ),
+        (
+            {"continuous": True, "fuse_on_request": True, "service_url": "grpc://robot:50051"},
+            "continuous and fuse_on_request do not go together",
         ),
     ]:
         with pytest.raises(ValueError, match=words):

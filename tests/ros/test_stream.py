@@ -8,9 +8,10 @@ from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import numpy as np
-import pytest
 
-pytest.importorskip("rclpy", reason="the ros extra is not installed: pip install 'vgn-service[ros]'")
+from tests.ros import need_ros
+
+need_ros()
 
 from ros_bridge.assemble import Frame  # noqa: E402
 from ros_bridge.stream import Ended, TrackStream, Update  # noqa: E402
