@@ -331,6 +331,8 @@ def _status(vgn: VGNClient) -> int:
     print(f"service   {vgn.url}: up")
     print(f"ready     {readiness.ready} ({readiness.detail})")
     print(f"model     {model.model_id or '-'} from {model.source or '-'} on {model.device}")
+    if model.one_view is not None:  # answers on volumes fused from one frame
+        print(f"one-view  {model.one_view.model_id} from {model.one_view.source}")
     return 0 if readiness.ready else 1
 
 

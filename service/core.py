@@ -30,7 +30,8 @@ from service.settings import Settings
 from service.snapshot import Snapshot
 from service.snapshot import decode as decode_snapshot
 from service.snapshot import encode as encode_snapshot
-from vgn_contract.gripper_description import DEFAULT_GRIPPER
+from service.vgn.checkpoint import CheckpointError
+from vgn_contract.gripper_description import DEFAULT_GRIPPER, GripperDescription
 from vgn_contract.schemas import (
     ANTIPODAL_DEFAULT_THRESHOLD,
     FrameMeta,
@@ -43,6 +44,7 @@ from vgn_contract.schemas import (
     GripperList,
     Intrinsics,
     ModelInfo,
+    OneViewModel,
     RuntimeInfo,
     SessionCreate,
     SessionInfo,
@@ -56,14 +58,21 @@ CONVENTIONS = {
     "grasp_frame": "+z approach, y finger closing axis, origin between the finger bases",
     "grid": "observed |tsdf|<0.98 voxels hold (tsdf+1)/2, others 0; indexed [x, y, z]",
 }
+#: Volumes fused from this many frames are the one-view network's (``VGN_ONE_VIEW_MODEL``): one fixed
+#: camera's side view, too little of the surface for the grip check as well (``MIN_GRIP_FRAMES``).
+ONE_VIEW_FRAMES = 1
 
 
 class PlanningService:
     """Sessions of fused depth frames and VGN grasp planning on them (thread-safe)."""
 
-    def __init__(self, settings: Settings, planner: GraspPlanner) -> None:
+    def __init__(
+        self, settings: Settings, planner: GraspPlanner, one_view: GraspPlanner | None = None
+    ) -> None:
         self.settings = settings
         self.planner = planner
+        #: Answers in ``planner``'s place on one-frame volumes of the default hand (:meth:`network_for`).
+        self.one_view = one_view
         self.grip_config = GripConfig(preferred_alignment=settings.grip_preferred_alignment)
         self.hands = Hands.build(settings.grippers, settings.network_grippers)
         self.sessions = SessionStore(
@@ -89,7 +98,8 @@ class PlanningService:
             settings.lanes,
             settings.heads,
         )
-        return cls(settings, GraspPlanner.from_path(settings.model_path(), settings.device, options))
+        planner = GraspPlanner.from_path(settings.model_path(), settings.device, options)
+        return cls(settings, planner, load_one_view(settings, planner))
 
     def close(self) -> None:
         """Free the sessions and end the cloud worker thread (at shutdown)."""
@@ -258,20 +268,21 @@ class PlanningService:
         # Planning runs outside the session lock so frames can keep arriving.
         # With a check, every grasp is checked and only then are max_grasps kept.
         ranked = query.model_copy(update={"max_grasps": None}) if clearance or grip else query
+        network = self.network_for(frame_count, session_hand)
         if baseline:
             config = antipodal_config(ranked)
             grasps, model = plan_antipodal(observed, workspace_pose, config, session_hand), "antipodal"
             threshold = config.threshold
         else:
             turn_average = self.settings.turn_average if query.turn_average is None else query.turn_average
-            key = (revision, turn_average)
+            key = (revision, turn_average)  # one revision: one frame count, so one network
             reuse = self.settings.reuse_output and kept is not None and kept[0] == key
-            output = kept[1] if reuse else self.planner.infer(observed, turn_average)
-            grasps = self.planner.detect(observed, output, voxel_size, workspace_pose, ranked)
+            output = kept[1] if reuse else network.infer(observed, turn_average)
+            grasps = network.detect(observed, output, voxel_size, workspace_pose, ranked)
             if self.settings.reuse_output and not reuse:
                 self._keep_output(session_id, key, output)
-            model = self.planner.model_id or ""
-            threshold = resolved_threshold(query, self.planner.default_threshold)
+            model = network.model_id or ""
+            threshold = resolved_threshold(query, network.default_threshold)
 
         def checked_of(candidates: list[Grasp]) -> Checked:
             return check_grasps(candidates, surface, grid, voxel_size, workspace_pose, workspace_size,
@@ -286,7 +297,7 @@ class PlanningService:
             # Nothing passed at the operating threshold: rather than leave the robot with nothing to
             # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
             lower = ranked.model_copy(update={"threshold": floor})
-            checked = checked_of(self.planner.detect(observed, output, voxel_size, workspace_pose, lower))
+            checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
             threshold = floor
             if not checked.grasps and self.settings.surface_fallback:
                 # Still nothing: the pairs the observed surface offers, under the same checks.
@@ -313,6 +324,13 @@ class PlanningService:
             grip=grip_on,
             fallback=fallback,
         )
+
+    def network_for(self, frame_count: int, hand: GripperDescription) -> GraspPlanner:
+        """The network for a volume fused from ``frame_count`` frames, planning for ``hand``: the
+        one-view network on one frame of the default hand, whose grasps it was trained on; the main
+        network otherwise, and wherever no one-view network is loaded."""
+        one_view = frame_count == ONE_VIEW_FRAMES and hand.name == DEFAULT_GRIPPER
+        return self.one_view if one_view and self.one_view is not None else self.planner
 
     def _keep_output(self, session_id: str, key: tuple[int, bool], output: object) -> None:
         """Keep a session's network output, with the (revision, turn averaging) it was made
@@ -355,4 +373,26 @@ class PlanningService:
             card=self.planner.card,
             defaults=defaults,
             runtime=RuntimeInfo.model_validate({**runtime_report(), **self.planner.runtime(), **repeated}),
+            one_view=self._one_view_info(),
         )
+
+    def _one_view_info(self) -> OneViewModel | None:
+        """The one-view network as ``GET /model`` reports it; ``None`` when none is loaded."""
+        one_view = self.one_view
+        if one_view is None or one_view.model_id is None or one_view.source is None:
+            return None
+        return OneViewModel(model_id=one_view.model_id, source=one_view.source, threshold=one_view.default_threshold,
+                            gripper=DEFAULT_GRIPPER, card=one_view.card)  # fmt: skip
+
+
+def load_one_view(settings: Settings, main: GraspPlanner) -> GraspPlanner | None:
+    """The one-view network ``settings`` name, taking turns with ``main`` on the same cores;
+    ``None`` when they name none. A file that cannot be loaded stops the start-up, naming the
+    setting, since two weights files are in play."""
+    path = settings.one_view_model_path()
+    if path is None:
+        return None
+    try:
+        return GraspPlanner.from_path(path, settings.device, main.options, alongside=main)
+    except CheckpointError as error:
+        raise CheckpointError(f"VGN_ONE_VIEW_MODEL: {error}") from None

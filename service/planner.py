@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -135,6 +136,9 @@ class GraspPlanner:
     """Runs VGN on a grid and turns its output into world-frame grasps.
 
     Without weights the planner exists but is not ready: ``plan`` raises ``ModelNotReady``.
+    A planner built ``alongside`` another (a second network of the service) takes turns with it:
+    one forward pass at a time, whichever network's, on the same lanes, so that two networks
+    do not oversubscribe the cores that one batch already fills.
     """
 
     def __init__(
@@ -145,6 +149,7 @@ class GraspPlanner:
         source: str | None,
         card: dict[str, Any] | None = None,
         options: InferenceOptions = InferenceOptions(),
+        alongside: GraspPlanner | None = None,
     ) -> None:
         self.device = device
         self.model_id = model_id
@@ -162,22 +167,32 @@ class GraspPlanner:
         window_ms = options.batch_window_ms
         self.batch_window_ms = default_batch_window_ms(device) if window_ms is None else window_ms
         self._batcher = MicroBatcher(self._forward_batch, self.batch_window_ms / 1e3, options.max_batch)
-        self.lanes = default_lanes(device) if options.lanes is None else max(1, options.lanes)
-        self._lane_pool = (
-            ThreadPoolExecutor(self.lanes - 1, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
-        )
+        if alongside is not None:
+            self.lanes, self._lane_pool, self._turn = alongside.lanes, alongside._lane_pool, alongside._turn
+        else:
+            self.lanes = default_lanes(device) if options.lanes is None else max(1, options.lanes)
+            self._lane_pool = (
+                ThreadPoolExecutor(self.lanes - 1, thread_name_prefix="vgn-lane") if self.lanes > 1 else None
+            )
+            self._turn = threading.Lock()  # one forward pass at a time, of the planners that share it
 
     @classmethod
     def from_path(
-        cls, path: Path | None, device: str = "auto", options: InferenceOptions = InferenceOptions()
+        cls,
+        path: Path | None,
+        device: str = "auto",
+        options: InferenceOptions = InferenceOptions(),
+        alongside: GraspPlanner | None = None,
     ) -> GraspPlanner:
-        """Load and warm up the weights at ``path``; ``None`` gives a planner with no model."""
+        """Load and warm up the weights at ``path``; ``None`` gives a planner with no model.
+        ``alongside``: a planner whose forward passes and lanes this one shares."""
         torch_device = resolve_device(device)
         if path is None:
-            return cls(None, torch_device, None, None, options=options)
+            return cls(None, torch_device, None, None, options=options, alongside=alongside)
+        network = load_vgn(path)  # first: a missing file is a CheckpointError that says so
         model_id = weights_id(path)
         card = card_summary(path, model_id)
-        planner = cls(load_vgn(path), torch_device, model_id, str(path), card, options)
+        planner = cls(network, torch_device, model_id, str(path), card, options, alongside)
         planner.warm_up()
         return planner
 
@@ -238,14 +253,15 @@ class GraspPlanner:
         side by side (see :func:`default_lanes`)."""
         assert self._network is not None
         lanes = min(len(grids), self.lanes)
-        if lanes > 1 and self._lane_pool is not None:
-            # The calling thread runs the first part itself: it is awake and its caches are
-            # warm, while each hand-off to an idle lane costs a wake-up.
-            first, *others = np.array_split(grids, lanes)
-            pending = [self._lane_pool.submit(self._forward_part, part) for part in others]
-            parts = [self._forward_part(first), *(future.result() for future in pending)]
-        else:
-            parts = [self._forward_part(grids)]
+        with self._turn:
+            if lanes > 1 and self._lane_pool is not None:
+                # The calling thread runs the first part itself: it is awake and its caches are
+                # warm, while each hand-off to an idle lane costs a wake-up.
+                first, *others = np.array_split(grids, lanes)
+                pending = [self._lane_pool.submit(self._forward_part, part) for part in others]
+                parts = [self._forward_part(first), *(future.result() for future in pending)]
+            else:
+                parts = [self._forward_part(grids)]
         return [output for part in parts for output in part]
 
     def _forward_part(self, grids: np.ndarray) -> list[NetworkOutput]:

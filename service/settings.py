@@ -13,6 +13,8 @@ from vgn_contract.gripper_description import DEFAULT_GRIPPER
 
 #: The packaged default model; the service uses it when ``VGN_MODEL`` is unset.
 PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
+#: The packaged network for volumes fused from one frame; the default of ``VGN_ONE_VIEW_MODEL``.
+PACKAGED_ONE_VIEW_MODEL = Path(__file__).parent / "models" / "vgn-one-view.safetensors"
 #: ``VGN_MODEL=none``: serve without a model (the antipodal planner still works).
 NO_MODEL = "none"
 
@@ -26,6 +28,13 @@ class Settings(BaseSettings):
         default=None,
         description="weights file (.safetensors preferred, or a .pt/.pth state_dict); "
         "when unset the packaged default is used; 'none' serves without a model (antipodal planner only)",
+    )
+    one_view_model: Literal["none"] | Path | None = Field(
+        default=None,
+        description="weights of the network that answers VGN requests on volumes fused from one frame (one "
+        "fixed camera), in place of VGN_MODEL's, for sessions of the default hand; its card beside it gives "
+        "its operating threshold. Unset: the packaged one-view weights where they ship, else none; 'none': "
+        "VGN_MODEL's network answers every volume. Not loaded without VGN_MODEL's network",
     )
     device: Literal["auto", "cpu", "cuda"] = Field(default="auto", description="torch device")
     torch_threads: int | None = Field(
@@ -161,7 +170,7 @@ class Settings(BaseSettings):
         "to a session with frames queued waits for room",
     )
 
-    @field_validator("model", "api_key", mode="before")
+    @field_validator("model", "one_view_model", "api_key", mode="before")
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
         """``VGN_API_KEY=`` or ``VGN_MODEL=`` in an env file means "not set"."""
@@ -174,8 +183,21 @@ class Settings(BaseSettings):
     def model_path(self) -> Path | None:
         """The weights to load: ``VGN_MODEL``, else the packaged default if it exists; ``None``
         for ``VGN_MODEL=none``."""
-        if self.model == NO_MODEL:
+        return _weights_path(self.model, PACKAGED_MODEL)
+
+    def one_view_model_path(self) -> Path | None:
+        """The one-view weights to load, chosen as :meth:`model_path` chooses; ``None`` also
+        without a main network, since the one-view network only stands in for it."""
+        if self.model_path() is None:
             return None
-        if self.model is not None:
-            return self.model
-        return PACKAGED_MODEL if PACKAGED_MODEL.exists() else None
+        return _weights_path(self.one_view_model, PACKAGED_ONE_VIEW_MODEL)
+
+
+def _weights_path(setting: Path | str | None, packaged: Path) -> Path | None:
+    """A weights setting's file: the path it names, ``None`` for ``none``, and when unset the
+    packaged file if it ships."""
+    if setting == NO_MODEL:
+        return None
+    if setting is not None:
+        return Path(setting)
+    return packaged if packaged.exists() else None

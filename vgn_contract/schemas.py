@@ -390,7 +390,10 @@ class GraspResult(_Model):
     planning_ms: float = Field(description="grid read-out + network + detection on the service")
     integration_ms: float = Field(description="total integration time of the fused frames")
     frame_count: int
-    model: str = Field(description="id of the weights that planned these grasps, or 'antipodal'")
+    model: str = Field(
+        description="id of the weights that planned these grasps (on a volume fused from one frame, the one-view "
+        "network's where the service has one: /model's one_view), or 'antipodal'"
+    )
     threshold: float = Field(description="the quality threshold these grasps passed")
     clearance_dropped: int | None = Field(
         default=None,
@@ -524,6 +527,23 @@ class RuntimeInfo(_Model):
     fallback_threshold: float | None = _moved_to_defaults("fallback_threshold")
 
 
+class OneViewModel(_Model):
+    """The network that answers vgn requests on volumes fused from one frame in place of the main one: from
+    one fixed camera the fused surface is a single noisy side view, which a network trained on such
+    views reads better."""
+
+    model_id: str = Field(description="sha256 prefix of its weights file: the model its answers name")
+    source: str = Field(description="where its weights were loaded from")
+    threshold: float = Field(
+        description="threshold of its requests that give none: its card's operating threshold, "
+        f"else {VGN_DEFAULT_THRESHOLD} (VGN's)"
+    )
+    gripper: str = Field(description="the hand whose sessions it answers; other hands' get the main network")
+    card: dict[str, Any] | None = Field(
+        default=None, description="from its model card, as ModelInfo's card, when there is one"
+    )
+
+
 class ModelInfo(_Model):
     """The loaded weights (or why none are), where they run, and how they are used."""
 
@@ -552,6 +572,11 @@ class ModelInfo(_Model):
         description="how the network runs: torch threads, OpenMP wait policy (and whether the service "
         "set it before torch loaded), allocator settings, inference form, precision, micro-batching window "
         "and counts; its turn_average, clearance, grip and fallback_threshold are deprecated (read defaults)",
+    )
+    one_view: OneViewModel | None = Field(
+        default=None,
+        description="the network that answers vgn requests on volumes fused from one frame "
+        "(VGN_ONE_VIEW_MODEL); null: the main network answers those too, or a service older than this field",
     )
 
     @model_validator(mode="after")

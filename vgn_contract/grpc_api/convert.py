@@ -21,6 +21,7 @@ from vgn_contract.schemas import (
     GripperList,
     Intrinsics,
     ModelInfo,
+    OneViewModel,
     Pose,
     RuntimeInfo,
     SessionInfo,
@@ -208,11 +209,21 @@ def gripper_list_message(hands: GripperList) -> pb.GripperList:
 
 def model_info_message(info: ModelInfo) -> pb.ModelInfo:
     """The service's ``ModelInfo`` as a reply; the free-form card and the runtime travel as JSON text."""
-    data = info.model_dump(exclude={"card", "runtime", "defaults"}, exclude_none=True)
-    card_json = None if info.card is None else json.dumps(info.card)
+    data = info.model_dump(exclude={"card", "runtime", "defaults", "one_view"}, exclude_none=True)
     runtime_json = None if info.runtime is None else info.runtime.model_dump_json()
     defaults = None if info.defaults is None else pb.GraspDefaults(**info.defaults.model_dump())
-    return pb.ModelInfo(card_json=card_json, runtime_json=runtime_json, defaults=defaults, **data)
+    one_view = None if info.one_view is None else one_view_message(info.one_view)
+    return pb.ModelInfo(card_json=_card_json(info.card), runtime_json=runtime_json, defaults=defaults,
+                        one_view=one_view, **data)  # fmt: skip
+
+
+def one_view_message(one_view: OneViewModel) -> pb.OneViewModel:
+    """The one-view network of a ``ModelInfo`` as its message, the card as JSON text as the main one's."""
+    return pb.OneViewModel(card_json=_card_json(one_view.card), **one_view.model_dump(exclude={"card"}))
+
+
+def _card_json(card: dict[str, Any] | None) -> str | None:
+    return None if card is None else json.dumps(card)
 
 
 def array_bytes(array: np.ndarray) -> bytes:
@@ -323,7 +334,15 @@ def model_info(message: pb.ModelInfo) -> ModelInfo:
         runtime=RuntimeInfo.model_validate_json(message.runtime_json)
         if message.HasField("runtime_json")
         else None,
+        one_view=one_view(message.one_view) if message.HasField("one_view") else None,
     )
+
+
+def one_view(message: pb.OneViewModel) -> OneViewModel:
+    """A ``OneViewModel`` message as the client's model, its card decoded from JSON."""
+    card = json.loads(message.card_json) if message.HasField("card_json") else None
+    fields = {name: getattr(message, name) for name in OneViewModel.model_fields if name != "card"}
+    return OneViewModel(card=card, **fields)
 
 
 def grasp_defaults(message: pb.GraspDefaults) -> GraspDefaults:

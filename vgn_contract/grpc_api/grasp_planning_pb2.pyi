@@ -328,7 +328,7 @@ class GripperList(_message.Message):
     def __init__(self, grippers: _Optional[_Iterable[_Union[GripperInfo, _Mapping]]] = ..., default: _Optional[str] = ...) -> None: ...
 
 class ModelInfo(_message.Message):
-    __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json", "defaults")
+    __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json", "defaults", "one_view")
     class ConventionsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -348,6 +348,7 @@ class ModelInfo(_message.Message):
     CARD_JSON_FIELD_NUMBER: _ClassVar[int]
     RUNTIME_JSON_FIELD_NUMBER: _ClassVar[int]
     DEFAULTS_FIELD_NUMBER: _ClassVar[int]
+    ONE_VIEW_FIELD_NUMBER: _ClassVar[int]
     loaded: bool
     model_id: str
     source: str
@@ -360,7 +361,22 @@ class ModelInfo(_message.Message):
     card_json: str
     runtime_json: str
     defaults: GraspDefaults
-    def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ..., defaults: _Optional[_Union[GraspDefaults, _Mapping]] = ...) -> None: ...
+    one_view: OneViewModel
+    def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ..., defaults: _Optional[_Union[GraspDefaults, _Mapping]] = ..., one_view: _Optional[_Union[OneViewModel, _Mapping]] = ...) -> None: ...
+
+class OneViewModel(_message.Message):
+    __slots__ = ("model_id", "source", "threshold", "gripper", "card_json")
+    MODEL_ID_FIELD_NUMBER: _ClassVar[int]
+    SOURCE_FIELD_NUMBER: _ClassVar[int]
+    THRESHOLD_FIELD_NUMBER: _ClassVar[int]
+    GRIPPER_FIELD_NUMBER: _ClassVar[int]
+    CARD_JSON_FIELD_NUMBER: _ClassVar[int]
+    model_id: str
+    source: str
+    threshold: float
+    gripper: str
+    card_json: str
+    def __init__(self, model_id: _Optional[str] = ..., source: _Optional[str] = ..., threshold: _Optional[float] = ..., gripper: _Optional[str] = ..., card_json: _Optional[str] = ...) -> None: ...
 
 class GraspDefaults(_message.Message):
     __slots__ = ("turn_average", "clearance", "grip", "threshold", "antipodal_threshold", "fallback_threshold")
