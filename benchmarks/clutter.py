@@ -151,12 +151,13 @@ def combinations(args: argparse.Namespace) -> Iterator[tuple[str, str, str, Path
 def table_row(planner: str, selection: str, scenario: str, config: dict, summary: dict) -> dict:
     """One line of the results table: the run's identity (VGN with turn averaging is ``vgn+turns``,
     a planner with the clearance check ``PLANNER+clearance``, with the grip check ``PLANNER+grip``),
-    its threshold and model, and its summary."""
+    its threshold and model (and the one-view network, where the service had one), and its summary."""
     planner += "+turns" if config.get("turn_average") else ""
     planner += "+clearance" if config.get("clearance") else ""
     planner += "+grip" if config.get("grip") else ""
+    one_view = {"one_view_model": config["one_view_model"]} if config.get("one_view_model") else {}
     return {"planner": planner, "selection": selection, "scenario": scenario,
-            "threshold": config["threshold"], "model": config["model"], **summary}  # fmt: skip
+            "threshold": config["threshold"], "model": config["model"], **one_view, **summary}  # fmt: skip
 
 
 def run_all(

@@ -40,9 +40,12 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
         turns = defaults.turn_average if config.turn_average is None else config.turn_average
         # The service falls back only for requests that name no threshold and run a check.
         floor = defaults.fallback_threshold if config.threshold is None and (clearance or grip) else None
+        one_view = model.one_view
         return dataclasses.replace(
             config,
             model=model.model_id,
+            one_view_model=one_view.model_id if one_view is not None else None,
+            one_view_threshold=(config.threshold or one_view.threshold) if one_view is not None else None,
             threshold=threshold,
             fallback_threshold=floor if floor is not None and floor < threshold else None,
             turn_average=turns,

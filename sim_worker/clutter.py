@@ -81,6 +81,10 @@ class ClutterConfig:
     noise: bool = False
     renderer: Renderer = "auto"
     model: str | None = None  # id of the service's weights, recorded with the results
+    # The service's network for one-frame volumes and its threshold, when it has one: it answers the
+    # looks of one frame (resolve_planner records them; docs/configuration.md).
+    one_view_model: str | None = None
+    one_view_threshold: float | None = None
     # Ask the service to drop grasps whose approach hits observed geometry or whose fingers would
     # not meet the surface squarely, and VGN for outputs averaged over four quarter turns of the
     # grid; None: the service's default for each (resolve_planner records what that was before a
@@ -126,6 +130,7 @@ class ClutterConfig:
         check_at_least("rounds", self.rounds, 1)
         check_fraction("threshold", self.threshold, optional=True)
         check_fraction("fallback_threshold", self.fallback_threshold, optional=True)
+        check_fraction("one_view_threshold", self.one_view_threshold, optional=True)
         check_fraction("disturb", self.disturb)
         unknown = self.left_to_service - set(SERVICE_OPTIONS)
         if unknown:
@@ -148,7 +153,7 @@ class ClutterConfig:
         if self.hand != default_gripper():
             settings |= {"gripper": self.hand.name, "gripper_digest": self.hand.digest}
         for switch in ("clearance", "grip", "turn_average", "sensor", "pose_error", "disturb", "closed_loop",
-                       "fallback_threshold"):  # fmt: skip
+                       "fallback_threshold", "one_view_model", "one_view_threshold"):  # fmt: skip
             if not settings[switch]:
                 del settings[switch]
         if settings["scan"] == "fixed":
@@ -409,8 +414,10 @@ def check_answer(config: ClutterConfig, answer: GraspResult) -> None:
         for name in recorded
         if recorded[name] is not None and answered[name] is not None and answered[name] != recorded[name]
     ]
-    thresholds = {config.threshold, config.fallback_threshold} - {None}
-    if config.threshold is not None and answer.threshold not in thresholds:
+    main = config.one_view_model is None or answer.model != config.one_view_model
+    threshold = config.threshold if main else config.one_view_threshold
+    thresholds = {threshold, config.fallback_threshold} - {None}
+    if threshold is not None and answer.threshold not in thresholds:
         differ.append(f"threshold {answer.threshold} (recorded: {' or '.join(map(str, sorted(thresholds)))})")
     if differ:
         raise ServiceDefaultsError(

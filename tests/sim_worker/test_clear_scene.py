@@ -13,7 +13,7 @@ from sim_worker.clutter import camera_views
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 from tests.helpers.runs import check_results, clear_scene, read_csv
-from vgn_contract.schemas import GraspDefaults, GraspResult, ModelInfo
+from vgn_contract.schemas import GraspDefaults, GraspResult, ModelInfo, OneViewModel
 
 VGN_COLUMNS = ["round_id", "scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "score", "label",
                "integration_time", "planning_time"]  # fmt: skip
@@ -228,12 +228,13 @@ BEST = OFF.model_copy(update={"turn_average": True, "clearance": True, "grip": T
 class ServiceDefaults:
     """Stands in for a client of a service whose ``/model`` reports ``defaults``."""
 
-    def __init__(self, defaults: GraspDefaults | None) -> None:
+    def __init__(self, defaults: GraspDefaults | None, one_view: OneViewModel | None = None) -> None:
         self.defaults = defaults
+        self.one_view = one_view
 
     def model(self) -> ModelInfo:
         return ModelInfo(loaded=True, model_id="m", source=None, architecture="VGN", parameters=1, device="cpu",
-                         conventions={}, threshold=0.8, defaults=self.defaults)  # fmt: skip
+                         conventions={}, threshold=0.8, defaults=self.defaults, one_view=self.one_view)  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -308,6 +309,27 @@ def test_an_answer_that_used_other_options_than_the_record_stops_the_run():
             check_answer(config, answer.model_copy(update=changed))
     baseline = resolve_planner(ClutterConfig(planner="antipodal"), ServiceDefaults(BEST))
     check_answer(baseline, answer.model_copy(update={"threshold": 0.4, "turn_average": None}))
+
+
+def test_the_one_view_network_is_recorded_and_its_answers_checked_against_its_threshold():
+    """One-frame looks are answered by the service's one-view network at its own threshold."""
+    from sim_worker.clear_scene import resolve_planner
+    from sim_worker.clutter import ClutterConfig, ServiceDefaultsError, check_answer
+
+    one_view = OneViewModel(model_id="o", source="o.safetensors", threshold=0.65, gripper="franka")
+    config = resolve_planner(ClutterConfig(views="side"), ServiceDefaults(BEST, one_view))
+    assert (config.one_view_model, config.one_view_threshold) == ("o", 0.65)
+    assert config.as_json()["one_view_model"] == "o"
+    answer = GraspResult(grasps=[], planning_ms=1.0, integration_ms=1.0, frame_count=1, model="o", threshold=0.65,
+                         turn_average=True, clearance=True, grip=True, fallback=False)  # fmt: skip
+    check_answer(config, answer)
+    check_answer(config, answer.model_copy(update={"model": "m", "threshold": 0.8, "frame_count": 2}))
+    for changed in ({"threshold": 0.8}, {"model": "m"}):
+        with pytest.raises(ServiceDefaultsError, match="threshold"):
+            check_answer(config, answer.model_copy(update=changed))
+    named = resolve_planner(ClutterConfig(threshold=0.7), ServiceDefaults(BEST, one_view))
+    assert named.one_view_threshold == 0.7
+    assert "one_view_model" not in resolve_planner(ClutterConfig(), ServiceDefaults(BEST)).as_json()
 
 
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):
