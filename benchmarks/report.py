@@ -224,6 +224,9 @@ def clutter_page(results: Path) -> str:
 EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("shipped-", "How do the shipped weights trade success for objects cleared at other thresholds? "
                  "(With earlier runs of their default request, which newer results replace in the README's table.)"),
+    ("one-view-", "Does a network fine-tuned on single side views plan better from one camera than the shipped "
+                  "one, and does a privileged teacher (the scene clean from six views) help it? (With the shipped "
+                  "weights' runs on the same code, which the README's table shows.)"),
     ("alternatives-", "When a check drops a grasp, do other poses under other rules than the shipped ones "
                       "(any grip, no steps back) find grasps that hold?"),
     ("support-default-", "What does judging faces just above the table by their horizontal normal do to the "
