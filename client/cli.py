@@ -41,21 +41,6 @@ from vgn_contract.gripper_description import (
 )
 from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspQuery
 
-TURN_AVERAGE_HELP = (
-    "score and orient grasps by the network's outputs averaged over four quarter turns of the grid, or not "
-    "(VGN only; default: the service's, on unless its operator turned it off)"
-)
-CLEARANCE_HELP = (
-    "drop grasps whose open hand would touch the observed surface on its approach, or not "
-    "(default: the service's, on unless its operator turned it off)"
-)
-
-
-GRIP_HELP = (
-    "drop grasps whose closing fingers would not both meet the observed surface squarely, or not "
-    "(default: the service's, on unless its operator turned it off)"
-)
-
 
 def add_looking_options(parser: argparse.ArgumentParser) -> None:
     """How a clutter-removal run sees and disturbs the scene: ``--views``, ``--noise``, ``--sensor``,
@@ -112,7 +97,7 @@ def add_query_options(parser: argparse.ArgumentParser, max_grasps: int) -> None:
     ``max_grasps`` is the command's default (``--top`` is its older name)."""
     for name, field in GraspQuery.model_fields.items():
         if name in SWITCHES:
-            continue
+            continue  # add_check_switches adds them, as it does for clear-scene and the benchmark
         flag, kind = "--" + name.replace("_", "-"), _flag_type(field.annotation)
         names = (flag, "--top") if name == "max_grasps" else (flag,)
         default = max_grasps if name == "max_grasps" else None  # None: the service's default
@@ -137,13 +122,17 @@ def _flag_type(annotation: object) -> object:
 
 
 def add_check_switches(parser: argparse.ArgumentParser, recorded: str = "") -> None:
-    """``--clearance/--no-clearance``, ``--grip/--no-grip`` and ``--turn-average/--no-turn-average``;
-    left out, each is ``None``: the service's default, which is its best answer."""
-    parser.add_argument("--clearance", action=argparse.BooleanOptionalAction, help=CLEARANCE_HELP + recorded)
-    parser.add_argument("--grip", action=argparse.BooleanOptionalAction, help=GRIP_HELP + recorded)
-    parser.add_argument(
-        "--turn-average", action=argparse.BooleanOptionalAction, help=TURN_AVERAGE_HELP + recorded
-    )
+    """``--clearance/--no-clearance``, ``--grip/--no-grip`` and ``--turn-average/--no-turn-average``,
+    derived from GraspQuery's fields like every query flag, help included; left out, each is ``None``:
+    the service's default, which is its best answer. clear-scene and the benchmark take only these,
+    which is why they are added here rather than in :func:`add_query_options`' loop."""
+    for name in SWITCHES:
+        parser.add_argument(
+            "--" + name.replace("_", "-"),
+            dest=name,
+            action=argparse.BooleanOptionalAction,
+            help=GraspQuery.model_fields[name].description + recorded,
+        )
 
 
 def _add_connection(parser: argparse.ArgumentParser) -> None:

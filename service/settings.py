@@ -10,6 +10,7 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from service.grip import GripConfig
 from vgn_contract.gripper_description import DEFAULT_GRIPPER
+from vgn_contract.schemas import SWITCH_EFFECTS
 
 #: The packaged default model; the service uses it when ``VGN_MODEL`` is unset.
 PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
@@ -17,6 +18,14 @@ PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
 PACKAGED_ONE_VIEW_MODEL = Path(__file__).parent / "models" / "vgn-one-view.safetensors"
 #: ``VGN_MODEL=none``: serve without a model (the antipodal planner still works).
 NO_MODEL = "none"
+
+
+def _switch_default(name: str) -> str:
+    """The operator's default for an on/off grasp option, worded from what the option does."""
+    return (
+        f"the default of requests that leave {name} unset (a request may still ask for {name}=true or "
+        f"{name}=false): {SWITCH_EFFECTS[name]}"
+    )
 
 
 class Settings(BaseSettings):
@@ -74,26 +83,9 @@ class Settings(BaseSettings):
         description="answer a grasp request on a session whose volume has not changed since the last one "
         "from that one's network output (detection only)",
     )
-    turn_average: bool = Field(
-        default=True,
-        description="turn-average VGN requests that do not say (turn_average): the network runs on the "
-        "grid turned four ways and averages; more grasps succeed, at about twice the planning time on a 2-core "
-        "CPU (four grids in one forward pass); a request may still ask for turn_average=false",
-    )
-    clearance: bool = Field(
-        default=True,
-        description="clearance-check requests that do not say (clearance): grasps whose open hand would "
-        "touch the observed surface on its approach are dropped, for both planners; fewer grasps fail on "
-        "contact, at about 3 ms a request (every grasp is checked before max_grasps applies); a request may "
-        "still ask for clearance=false",
-    )
-    grip: bool = Field(
-        default=True,
-        description="grip-check requests that do not say (grip): grasps whose closing fingers would not both "
-        "meet the observed surface squarely are dropped, and where some grip squarely the rest too, for "
-        "both planners; fewer grasps slip out while lifting, at about 1 ms a request; a request may still "
-        "ask for grip=false",
-    )
+    turn_average: bool = Field(default=True, description=_switch_default("turn_average"))
+    clearance: bool = Field(default=True, description=_switch_default("clearance"))
+    grip: bool = Field(default=True, description=_switch_default("grip"))
     alternatives: bool = Field(
         default=True,
         description="when a check drops a grasp, try it again turned about its approach, tilted and stepped "

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import argparse
 
+import pytest
+
 from benchmarks import clutter
 from client.cli import build_parser
 from service.settings import Settings
 from vgn_contract.grpc_api import convert
 from vgn_contract.grpc_api import grasp_planning_pb2 as pb
-from vgn_contract.schemas import SWITCHES, GraspDefaults, GraspQuery, GraspResult
+from vgn_contract.schemas import SWITCH_EFFECTS, SWITCHES, GraspDefaults, GraspQuery, GraspResult
 
 #: gRPC fields that are not query options: which session the query is about.
 ADDRESSING = {"session_id"}
@@ -65,6 +67,37 @@ def test_every_switch_has_a_service_default_and_a_flag_wherever_runs_are_made():
     benchmark = clutter.parse_args([])
     assert set(SWITCHES) <= set(vars(benchmark))
     assert set(SWITCHES) <= set(GraspQuery.model_fields)
+
+
+def flag_helps(parser: argparse.ArgumentParser) -> dict[str, str]:
+    return {action.dest: action.help for action in parser._actions if action.option_strings}
+
+
+def benchmark_parser(monkeypatch: pytest.MonkeyPatch) -> argparse.ArgumentParser:
+    """The benchmark's parser: its ``parse_args`` builds one and parses at once."""
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", lambda self, *args, **kwargs: self)
+    return clutter.parse_args([])
+
+
+def test_every_query_flag_says_what_the_query_field_says():
+    for command in ("grasps", "view"):
+        helps = flag_helps(subcommand(command))
+        for name, field in GraspQuery.model_fields.items():
+            assert helps[name] == field.description, f"{command} --{name.replace('_', '-')}"
+
+
+def test_what_a_switch_does_is_said_once(monkeypatch: pytest.MonkeyPatch):
+    """The query field, the operator's default and every command's flag word a switch's effect
+    from ``SWITCH_EFFECTS``; a help text written anew beside it fails here."""
+    for name in SWITCHES:
+        assert GraspQuery.model_fields[name].description.startswith(SWITCH_EFFECTS[name] + ". Unset:"), name
+        assert Settings.model_fields[name].description.endswith(": " + SWITCH_EFFECTS[name]), name
+    commands = {command: subcommand(command) for command in ("grasps", "view", "clear-scene")}
+    commands["benchmark"] = benchmark_parser(monkeypatch)
+    for command, parser in commands.items():
+        helps = flag_helps(parser)
+        for name in SWITCHES:
+            assert helps[name].startswith(GraspQuery.model_fields[name].description), f"{command} {name}"
 
 
 def test_every_switch_is_reported_as_a_default_and_in_every_answer():

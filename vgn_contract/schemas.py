@@ -39,9 +39,29 @@ VGN_DEFAULT_THRESHOLD = 0.9
 #: scores ~0.95, a side grasp ~0.85), and everything it returns already passed its antipodal and
 #: collision checks, so the threshold only drops poorly opposed contacts.
 ANTIPODAL_DEFAULT_THRESHOLD = 0.5
+#: What each of the grasp query's on/off options does when on, and why, said once: the query's
+#: field, the service's default for it (service/settings.py) and the command line's flag
+#: (client/cli.py) are all worded from this. No figures: what a check costs is on the Performance page.
+SWITCH_EFFECTS: dict[str, str] = {
+    "clearance": "drop grasps whose open hand (the session's hand: its fingers at their maximum opening, "
+    "0.08 m for franka, and its palm) would touch the observed surface while approaching from its "
+    "pregrasp distance back along the approach (5 cm for franka), so that fewer grasps fail on contact; "
+    "applies to both planners, to every grasp before max_grasps, and adds a little planning time (see "
+    "Performance)",
+    "grip": "drop grasps whose closing fingers would not both meet the observed surface squarely, so that "
+    "fewer grasps slip out while lifting: from each pad, rays along the closing axis must reach the fused "
+    "surface and meet normals on average within 60 degrees of the closing direction (service/grip.py); "
+    "where some grasps meet normals within about 45 degrees (VGN_GRIP_PREFERRED_ALIGNMENT), only those are "
+    "kept; applies to both planners, before max_grasps, and adds a little planning time (see Performance); "
+    "not applied to a volume fused from a single frame, which misleads it",
+    "turn_average": "vgn only: score each grasp by the network's quality averaged over the grid turned by 0, "
+    "90, 180 and 270 degrees about the workspace z axis (the turns VGN trains with), and each grasp's "
+    "orientation by the mean of the four, so that more grasps succeed; widths stay those of the unturned "
+    "grid; the four grids share one forward pass, which lengthens planning (see Performance)",
+}
 #: The grasp query's on/off options; unset, each is the service's default (on unless its operator
 #: turned it off), so a client that sets one sends it either way.
-SWITCHES = ("clearance", "grip", "turn_average")
+SWITCHES = tuple(SWITCH_EFFECTS)
 
 
 class _Model(BaseModel):
@@ -235,6 +255,15 @@ def _vector3_field(description: str) -> Any:
     )
 
 
+def _switch_field(name: str, off: str) -> Any:
+    """An on/off option of the grasp query, described by its effect; unset, the service's default."""
+    return Field(
+        default=None,
+        description=f"{SWITCH_EFFECTS[name]}. Unset: the service's default (VGN_{name.upper()}, on unless "
+        f"the operator turned it off; /model defaults says); false gives {off}",
+    )
+
+
 def _checked_vector3_text(name: str, text: str | None) -> str | None:
     """``None`` for an absent or empty value; else the text, refused unless it is three numbers."""
     if text is None or text == "":
@@ -287,33 +316,9 @@ class GraspQuery(_Model):
         le=180.0,
         description="degrees between a grasp's approach and `approach`; only with approach",
     )
-    clearance: bool | None = Field(
-        default=None,
-        description="drop grasps whose open hand (fingers at the 0.08 m maximum opening and palm, "
-        "franka-v2 dimensions) would touch the observed surface while approaching from 5 cm back "
-        "along the approach; applies to both planners, before max_grasps; about 3 ms. Unset: the "
-        "service's default (VGN_CLEARANCE, on unless the operator turned it off; /model defaults says); "
-        "false gives the planner's unchecked grasps",
-    )
-    grip: bool | None = Field(
-        default=None,
-        description="drop grasps whose closing fingers would not both meet the observed surface squarely: "
-        "from each pad, rays along the closing axis must reach the fused surface and meet normals on "
-        "average within 60 degrees of the closing direction (service/grip.py); where some grasps meet "
-        "normals within about 45 degrees, only those are kept; applies to both planners, before "
-        "max_grasps; about 1 ms; not applied to a volume fused from a single frame, which misleads "
-        "it. Unset: the service's default (VGN_GRIP, on unless the operator turned it off; /model defaults "
-        "says); false gives the planner's unchecked grasps",
-    )
-    turn_average: bool | None = Field(
-        default=None,
-        description="vgn only: score each grasp by the network's quality averaged over the grid "
-        "turned by 0, 90, 180 and 270 degrees about the workspace z axis (the turns VGN trains "
-        "with), and each grasp's orientation by the mean of the four; four grids in one batch, about 2x the "
-        "time of a plain request on 2 CPU cores; widths stay those of the unturned grid. Unset: the "
-        "service's default (VGN_TURN_AVERAGE, on unless the operator turned it off; /model defaults says); "
-        "false gives VGN's plain answer",
-    )
+    clearance: bool | None = _switch_field("clearance", off="the planner's unchecked grasps")
+    grip: bool | None = _switch_field("grip", off="the planner's unchecked grasps")
+    turn_average: bool | None = _switch_field("turn_average", off="VGN's plain answer")
 
     @field_validator("crop_min", "crop_max", "approach", mode="before")
     @classmethod
