@@ -51,8 +51,8 @@ class Settings(BaseSettings):
     )
     inference: Literal["fast", "reference"] = Field(
         default="fast",
-        description="'fast': the network folded for inference (same grasps, ~4x less arithmetic); "
-        "'reference': VGN as trained, float32",
+        description="'fast': the network folded for inference, the same grasps for less arithmetic "
+        "(see Design); 'reference': VGN as trained, float32",
     )
     heads: Literal["auto", "on-demand", "whole"] = Field(
         default="auto",
@@ -67,8 +67,8 @@ class Settings(BaseSettings):
         default=None,
         ge=0,
         le=1000,
-        description="how long a grasp request waits for others to share its forward pass; "
-        "unset: 2 ms on a GPU, 0 on a CPU",
+        description="how long a grasp request waits for others to share its forward pass, in milliseconds; "
+        "unset: 2 on a GPU, 0 on a CPU",
     )
     max_batch: int = Field(default=32, ge=1, le=256, description="most grids in one forward pass")
     lanes: int | None = Field(

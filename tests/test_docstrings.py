@@ -4,17 +4,21 @@ A docstring says what a thing does and why, in a few lines. A measured figure (a
 speed-up, a share of runs) or the machine it was measured on belongs on a documentation page
 beside where and how it was measured (docs/performance.md, docs/design.md), where it can be
 updated without touching code and is said once. Values of settings and physical constants
-("5 cm", "10 Hz", "95 % interval") are not measurements and are allowed.
+("5 cm", "10 Hz", "95 % interval") are not measurements and are allowed. The same holds for the
+field descriptions of the API's schemas and the service's settings, which users read in the
+HTTP reference, openapi.json, the configuration page and ``--help``.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib
 import re
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from pydantic import BaseModel
 
 ROOT = Path(__file__).resolve().parents[1]
 MAX_LINES = 12
@@ -124,6 +128,34 @@ def test_docstrings_are_short_and_quote_no_measurements() -> None:
     )
 
 
+#: Modules whose pydantic models' field descriptions are published: the wire schemas and the settings.
+DESCRIBED_MODULES = ("vgn_contract.schemas", "service.settings")
+
+
+def field_descriptions(module_name: str) -> Iterator[tuple[str, str]]:
+    """``(Model.field, description)`` of every pydantic model the module defines."""
+    module = importlib.import_module(module_name)
+    for name, value in vars(module).items():
+        if isinstance(value, type) and issubclass(value, BaseModel) and value.__module__ == module_name:
+            for field_name, field in value.model_fields.items():
+                if field.description:
+                    yield f"{name}.{field_name}", field.description
+
+
+def test_field_descriptions_quote_no_measurements() -> None:
+    described = {
+        f"{module}:{name}": text for module in DESCRIBED_MODULES for name, text in field_descriptions(module)
+    }
+    assert {"vgn_contract.schemas:GraspQuery.clearance", "service.settings:Settings.turn_average"} <= set(
+        described
+    ), "the scan found no field descriptions"
+    found = [f"{where}: {note}" for where, text in described.items() for note in lab_notes(text)]
+    assert not found, (
+        "Field descriptions say what and why; measured figures and machines go to docs/performance.md "
+        "or docs/design.md:\n" + "\n".join(found)
+    )
+
+
 @pytest.mark.parametrize(
     "text",
     [
@@ -139,6 +171,9 @@ def test_docstrings_are_short_and_quote_no_measurements() -> None:
         "It was 8x faster on a 40³ grid.",
         "A request takes about 1.6x as long.",
         "Run on 2026-11-27.",
+        "Applies before max_grasps; about 3 ms.",
+        "Four grids in one batch, about 2x the time of a plain request on 2 CPU cores.",
+        "At about twice the planning time on a 2-core CPU.",
     ],
 )
 def test_measured_figures_are_caught(text: str) -> None:
