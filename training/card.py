@@ -1,5 +1,9 @@
 """The model card: a JSON file beside the weights saying what they were trained on and how
-well they did, so a weights file is never an anonymous blob."""
+well they did, so a weights file is never an anonymous blob.
+
+A card travels with its weights (one ships in the package), so it names no machine: paths are
+written relative to the directory the command ran in, or as ``~/...`` under the home directory,
+and that directory itself is not recorded (cards written before say ``working_directory``)."""
 
 from __future__ import annotations
 
@@ -16,6 +20,28 @@ from service.vgn.network import PARAMETER_COUNT
 from vgn_data.files import atomic_writer, write_atomically
 
 CARD_FORMAT = 1
+#: The fields of a dataset's entry in the card that hold a path (``cache`` may hold a note instead).
+DATASET_PATHS = ("path", "cache")
+
+
+def portable_path(path: str | Path, cwd: Path | None = None, home: Path | None = None) -> str:
+    """``path`` as a card records it: relative to ``cwd`` (the working directory) when inside it,
+    ``~/...`` when under ``home`` (the home directory), else unchanged, as is text that is not an
+    absolute path ("packed shards"). A working directory that is the file system's root does not
+    count: every path would be relative to it."""
+    text = str(path)
+    target = Path(text)
+    if not target.is_absolute():
+        return text
+    for base, prefix in ((cwd or Path.cwd(), ""), (home or Path(os.path.expanduser("~")), "~/")):
+        if not base.is_absolute() or base == Path(base.anchor):  # "~" when no home is known
+            continue
+        for root in dict.fromkeys((base, base.resolve())):
+            if target == root:
+                return "." if not prefix else "~"
+            if target.is_relative_to(root):
+                return prefix + target.relative_to(root).as_posix()
+    return text
 
 
 def code_version() -> dict[str, str | None]:
@@ -49,7 +75,8 @@ def build_card(
     threshold: float,
 ) -> dict[str, Any]:
     """The card's content; ``weights`` must already be written (its content id is recorded).
-    ``threshold`` is the operating threshold the service applies to requests that give none."""
+    ``threshold`` is the operating threshold the service applies to requests that give none.
+    The datasets' paths are made portable here; ``training`` holds its own (:func:`portable_path`)."""
     return {
         "format": CARD_FORMAT,
         "model": {
@@ -61,16 +88,20 @@ def build_card(
             "input": "TSDF grid (N,N,N) indexed [x,y,z], (tsdf+1)/2 where observed, else 0",
         },
         "threshold": threshold,
-        "datasets": datasets,
+        "datasets": [_portable_dataset(dataset) for dataset in datasets],
         "training": training,
         "epochs": len(history),
         "metrics": {"final": history[-1] if history else None, "best": best},
         "history": history,
         "code_version": code_version(),
         "command": command,
-        "working_directory": os.getcwd(),
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
     }
+
+
+def _portable_dataset(dataset: dict[str, Any]) -> dict[str, Any]:
+    """A dataset's entry with its paths as :func:`portable_path` writes them."""
+    return {key: portable_path(v) if key in DATASET_PATHS and v else v for key, v in dataset.items()}
 
 
 def write_learning_curves(history: list[dict[str, Any]], path: Path) -> Path | None:

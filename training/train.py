@@ -29,7 +29,7 @@ from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vg
 from service.vgn.network import VGN
 from training import report
 from training.augment import MAX_Z_SHIFT
-from training.card import build_card, write_card, write_learning_curves
+from training.card import build_card, portable_path, write_card, write_learning_curves
 from training.checkpoint import (
     TrainingState,
     capture_rng,
@@ -744,11 +744,14 @@ def _training_settings(
         }[config.augment],
         "init": None
         if config.init is None
-        else {"path": str(config.init), "weights_id": weights_id(Path(config.init))},
+        else {"path": portable_path(config.init), "weights_id": weights_id(Path(config.init))},
         "distillation": None
         if config.teacher is None
         else {
-            "teacher": {"path": str(config.teacher), "weights_id": weights_id(Path(config.teacher))},
+            "teacher": {
+                "path": portable_path(config.teacher),
+                "weights_id": weights_id(Path(config.teacher)),
+            },
             "targets": "the teacher's turn-averaged quality, orientation and unturned width at every "
             "grasp-region voxel of each training scene, moved with the scene's augmentation",
             "weight": config.distill_weight,
