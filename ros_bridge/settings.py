@@ -18,7 +18,7 @@ from client.connect import is_grpc_url
 from client.http import grasp_query
 from ros_bridge.convert import fixed_pose
 from vgn_contract.gripper_description import NAME_PATTERN
-from vgn_contract.schemas import SWITCHES, Pose, Workspace
+from vgn_contract.schemas import SWITCH_EFFECTS, SWITCHES, Pose, Workspace
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -65,15 +65,10 @@ PARAMETERS: dict[str, tuple[Any, str]] = {
     "planner": ("vgn", "vgn or antipodal"),
     "threshold": (Parameter.Type.DOUBLE, "minimum grasp quality; unset: the service's default"),
     "max_grasps": (Parameter.Type.INTEGER, "publish at most this many grasps; unset: all"),
-    "turn_average": (Parameter.Type.BOOL, "vgn's turn averaging; unset: the service's default"),
-    "clearance": (
-        Parameter.Type.BOOL,
-        "drop grasps whose open hand hits the surface; unset: the service's default",
-    ),
-    "grip": (
-        Parameter.Type.BOOL,
-        "drop grasps whose fingers do not grip squarely; unset: the service's default",
-    ),
+    **{
+        name: (Parameter.Type.BOOL, f"{SWITCH_EFFECTS[name]}; unset: the service's default")
+        for name in SWITCHES
+    },
     "fuse_on_request": (
         False,
         "fuse only the first frame after each ~/fuse call (a wrist camera held still), not every frame",
