@@ -46,12 +46,6 @@ def service(random_checkpoint: Path) -> Iterator[EmbeddedService]:
 
 
 @pytest.fixture
-def clients(service: EmbeddedService) -> Iterator[tuple[VGNClient, GRPCClient]]:
-    with VGNClient(service.url) as http, GRPCClient(service.grpc_url) as rpc:
-        yield http, rpc
-
-
-@pytest.fixture
 def stub(service: EmbeddedService) -> Iterator[GraspPlanningStub]:
     with grpc.insecure_channel(service.grpc_url.removeprefix("grpc://")) as channel:
         yield GraspPlanningStub(channel)

@@ -48,12 +48,6 @@ def service(random_checkpoint: Path, one_view_weights: Path) -> Iterator[Embedde
         yield running
 
 
-@pytest.fixture
-def clients(service: EmbeddedService) -> Iterator[tuple[VGNClient, GRPCClient]]:
-    with VGNClient(service.url) as http, GRPCClient(service.grpc_url) as rpc:
-        yield http, rpc
-
-
 def answers_by_frames(client: VGNClient | GRPCClient, gripper: str | None = None) -> list[tuple[str, float]]:
     """(model, threshold) of the answers after the first frame and after the second."""
     session_id = client.create_session(intrinsics=INTRINSICS, gripper=gripper).session_id
