@@ -750,7 +750,7 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         core = PlanningService.from_settings(
             Settings(model=weights, torch_threads=threads, device=args.device, api_key=None)
         )
-        threshold = reported.threshold
+        threshold = reported.defaults.threshold if reported.defaults else reported.threshold  # older services
         network, direct_grasps = network_operations(
             weights, resolve_device(args.device), fused_grid(frames), threshold
         )
