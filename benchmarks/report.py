@@ -224,6 +224,8 @@ def clutter_page(results: Path) -> str:
 EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("shipped-", "How do the shipped weights trade success for objects cleared at other thresholds? "
                  "(With earlier runs of their default request, which newer results replace in the README's table.)"),
+    ("shapes-e1-", "Does an epoch on data that adds generated shapes to VGN's objects make the network "
+                   "generalize better (held-out and cross-source objects)?"),
     ("one-view-", "Does a network fine-tuned on single side views plan better from one camera than the shipped "
                   "one, and does a privileged teacher (the scene clean from six views) help it? (With the shipped "
                   "weights' runs on the same code, which the README's table shows.)"),
