@@ -750,12 +750,12 @@ def measure_all(args: argparse.Namespace, weights: Path) -> Results:
         core = PlanningService.from_settings(
             Settings(model=weights, torch_threads=threads, device=args.device, api_key=None)
         )
-        threshold = reported.defaults.threshold if reported.defaults else reported.threshold  # older services
+        other = other_options(service_defaults(reported))  # refuses a service that reports no defaults
+        threshold = reported.defaults.threshold  # type: ignore[union-attr]  # present: refused above otherwise
         network, direct_grasps = network_operations(
             weights, resolve_device(args.device), fused_grid(frames), threshold
         )
         plan, core_grasps = core_plan_operation(core, frames, GraspQuery())
-        other = other_options(service_defaults(reported))
         other_query = GraspQuery(**other)
         plan_other, _ = core_plan_operation(core, frames, other_query, other_way(PLAN, other))
         timed_counts: list[int] = []

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from client.moved import warn_moved
+from client.moved import forwarding, warn_moved
 
 if TYPE_CHECKING:
     from service.launch.embedded import EmbeddedService, bind_error, free_port
@@ -18,9 +17,4 @@ __all__ = [
     "free_port",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    """Each name on first use, so that importing ``client`` loads none of the server's package."""
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module("service.launch.embedded"), name)
+__getattr__ = forwarding(__name__, "service.launch.embedded", __all__)

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from client.moved import warn_moved
+from client.moved import forwarding, warn_moved
 
 if TYPE_CHECKING:
     from service.launch.fleet import EXEC_ENDING_WITH_PARENT, Fleet, FleetConfig, FleetError
@@ -19,9 +18,4 @@ __all__ = [
     "FleetError",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    """Each name on first use, so that importing ``client`` loads none of the server's package."""
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module("service.launch.fleet"), name)
+__getattr__ = forwarding(__name__, "service.launch.fleet", __all__)

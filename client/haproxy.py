@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import importlib
 import sys
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from client.moved import warn_moved
+from client.moved import forwarding, warn_moved
 
 if TYPE_CHECKING:
     from service.launch.haproxy import ProxyConfig, Replica, main, numbered, render
@@ -21,12 +21,7 @@ __all__ = [
     "render",
 ]
 
-
-def __getattr__(name: str) -> Any:
-    """Each name on first use, so that importing ``client`` loads none of the server's package."""
-    if name not in __all__:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module("service.launch.haproxy"), name)
+__getattr__ = forwarding(__name__, "service.launch.haproxy", __all__)
 
 
 if __name__ == "__main__":

@@ -5,6 +5,8 @@ from __future__ import annotations
 import importlib
 import sys
 import warnings
+from collections.abc import Callable
+from typing import Any
 
 
 def warn_moved(old: str, new: str) -> None:
@@ -31,3 +33,15 @@ def _is_bootstrap(filename: str) -> bool:
 def _is_import_machinery(filename: str) -> bool:
     """Whether a frame belongs to the import system rather than to code that imports."""
     return _is_bootstrap(filename) or filename == importlib.__file__
+
+
+def forwarding(old: str, new: str, names: list[str]) -> Callable[[str], Any]:
+    """A module ``__getattr__`` for ``old`` that reads each of ``names`` from ``new`` on first use, so
+    that importing ``client`` loads none of the server's package."""
+
+    def __getattr__(name: str) -> Any:
+        if name not in names:
+            raise AttributeError(f"module {old!r} has no attribute {name!r}")
+        return getattr(importlib.import_module(new), name)
+
+    return __getattr__

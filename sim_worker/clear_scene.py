@@ -45,7 +45,9 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
             config,
             model=model.model_id,
             one_view_model=one_view.model_id if one_view is not None else None,
-            one_view_threshold=(config.threshold or one_view.threshold) if one_view is not None else None,
+            one_view_threshold=(one_view.threshold if config.threshold is None else config.threshold)
+            if one_view is not None
+            else None,
             threshold=threshold,
             fallback_threshold=floor if floor is not None and floor < threshold else None,
             turn_average=turns,
