@@ -11,6 +11,7 @@ import datetime as dt
 import json
 import os
 import subprocess
+from collections.abc import Iterable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -64,6 +65,19 @@ def code_version() -> dict[str, str | None]:
     return {"package": package, "git": described or None}
 
 
+def labelling_hand(grippers: Iterable[str | None]) -> str | None:
+    """The version of the hand that labelled every dataset of a run, from each one's record
+    (``None``: not recorded); ``None`` when one does not record it. ``ValueError`` for datasets of
+    different hands: a network learns what one hand can hold, so their labels are never mixed."""
+    recorded = list(grippers)
+    hands = sorted(set(recorded) - {None})
+    if len(hands) > 1:
+        raise ValueError(
+            f"the data was labelled by different hands ({', '.join(hands)}): train on one hand's data"
+        )
+    return hands[0] if hands and None not in recorded else None
+
+
 def build_card(
     *,
     weights: Path,
@@ -73,10 +87,13 @@ def build_card(
     best: dict[str, Any] | None,
     command: str,
     threshold: float,
+    gripper: str | None = None,
 ) -> dict[str, Any]:
     """The card's content; ``weights`` must already be written (its content id is recorded).
-    ``threshold`` is the operating threshold the service applies to requests that give none.
-    The datasets' paths are made portable here; ``training`` holds its own (:func:`portable_path`)."""
+    ``threshold`` is the operating threshold the service applies to requests that give none;
+    ``gripper`` the version of the hand that labelled the data (:func:`labelling_hand`), which the
+    service checks against the hand a network is loaded for. The datasets' paths are made portable
+    here; ``training`` holds its own (:func:`portable_path`)."""
     return {
         "format": CARD_FORMAT,
         "model": {
@@ -88,6 +105,7 @@ def build_card(
             "input": "TSDF grid (N,N,N) indexed [x,y,z], (tsdf+1)/2 where observed, else 0",
         },
         "threshold": threshold,
+        "gripper": gripper,
         "datasets": [_portable_dataset(dataset) for dataset in datasets],
         "training": training,
         "epochs": len(history),

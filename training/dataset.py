@@ -104,6 +104,9 @@ class DatasetSummary:
     scenes_without_labels: int
     missing_scene_files: int
     cache: str
+    #: The version of the hand that labelled it (generation.json's or the manifest's ``gripper``);
+    #: ``None``: not recorded (data made elsewhere).
+    gripper: str | None = None
 
     def count(self, labels: LabelSet) -> None:
         """Count one scene that trains, with its labels."""
@@ -159,7 +162,8 @@ def load_scenes(
         key = cache_key(setup, resolution, max_depth)
         grids_dir = cache_dir(dataset.root, cache_root, resolution, key)
         ids, rows = dataset.grasps()
-        summary = DatasetSummary(str(dataset.root.resolve()), setup.size, 0, 0, 0, 0, 0, 0, 0, str(grids_dir))
+        summary = DatasetSummary(str(dataset.root.resolve()), setup.size, 0, 0, 0, 0, 0, 0, 0, str(grids_dir),
+                                 gripper=dataset.generation().get("gripper"))  # fmt: skip
         for scene_id, scene_rows in _group_rows(ids, rows):
             if not (dataset.scenes_dir / f"{scene_id}.npz").is_file():
                 summary.missing_scene_files += 1
@@ -206,7 +210,8 @@ def _load_packed(
     _check_grid(folder, manifest, resolution, max_depth)
     size = float(manifest["setup"]["size"])
     voxel_size = size / resolution
-    summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, "packed shards")
+    summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, "packed shards",
+                             gripper=manifest.get("gripper"))  # fmt: skip
     scenes: list[Scene] = []
     for shard in shards.load(verify=True):
         for scene_id, grid, rows in zip(shard.scene_ids, shard.grids, shard.rows_by_scene(), strict=True):
@@ -244,7 +249,8 @@ def _load_recipes(
         bar.close()
     size = float(manifest["setup"]["size"])
     voxel_size = size / resolution
-    summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, str(cache))
+    summary = DatasetSummary(str(folder.resolve()), size, 0, 0, 0, 0, 0, 0, 0, str(cache),
+                             gripper=manifest.get("gripper"))  # fmt: skip
     scenes: list[Scene] = []
     for shard, path in zip(shards, paths, strict=True):
         grids = open_cache(path, len(shard.scene_ids), settings)

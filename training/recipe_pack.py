@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -56,8 +55,7 @@ def pack_raw(
     ``source``; the digest is taken of the grid fused from the raw depth the labels were made on.
     Objects recorded by absolute path under a known root are named by the root
     (:func:`portable_objects`)."""
-    generation_path = raw.root / "generation.json"
-    generation = json.loads(generation_path.read_text()) if generation_path.is_file() else {}
+    generation = raw.generation()
     if "gripper" not in generation:
         raise ShardError(f"{raw.root} does not record the hand that labelled it (generation.json: gripper)")
     folder = RecipeFolder(out)

@@ -170,8 +170,7 @@ class ShardFolder:
         self, raw: RawDataset, source: str, resolution: int, max_depth: float
     ) -> dict[str, Any]:
         """The manifest to extend, after checking that ``raw`` may join it."""
-        generation_path = raw.root / "generation.json"
-        generation = json.loads(generation_path.read_text()) if generation_path.is_file() else {}
+        generation = raw.generation()
         gripper = generation.get("gripper")
         if gripper is None:
             raise ShardError(

@@ -29,7 +29,7 @@ from service.vgn.checkpoint import CheckpointError, card_path, load_vgn, save_vg
 from service.vgn.network import VGN
 from training import report
 from training.augment import MAX_Z_SHIFT
-from training.card import build_card, portable_path, write_card, write_learning_curves
+from training.card import build_card, labelling_hand, portable_path, write_card, write_learning_curves
 from training.checkpoint import (
     TrainingState,
     capture_rng,
@@ -383,6 +383,10 @@ def train(
         raise TrainingError(str(error)) from error
     if not scenes:
         raise TrainingError(f"no labelled scenes inside the grid in {', '.join(map(str, config.data))}")
+    try:
+        hand = labelling_hand(summary.gripper for summary in summaries)
+    except ValueError as error:
+        raise TrainingError(str(error)) from error
     train_scenes, val_scenes = split_scenes(scenes, config.val_fraction, config.seed)
     train_scenes = subsample_scenes(train_scenes, config.max_train_scenes, config.seed)
     for summary in summaries:
@@ -472,6 +476,7 @@ def train(
         best=best,
         command=command if command is not None else shlex.join(sys.argv),
         threshold=threshold,
+        gripper=hand,
     )
     card["threshold_choice"] = choice
     card["packed_data"] = _packed_data(config.data)

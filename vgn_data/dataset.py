@@ -20,7 +20,7 @@ import os
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -155,6 +155,12 @@ class RawDataset:
         self.grasps_path = self.root / "grasps.csv"
         if not self.grasps_path.exists():
             write_atomically(self.grasps_path, ",".join(GRASP_COLUMNS) + "\n")
+
+    def generation(self) -> dict[str, Any]:
+        """The settings the data generator recorded (generation.json), the hand that labelled the
+        scenes among them (``gripper``: its version); empty for a dataset made elsewhere."""
+        path = self.root / "generation.json"
+        return json.loads(path.read_text()) if path.is_file() else {}
 
     def add_scene(
         self,

@@ -13,7 +13,7 @@ import pytest
 
 from service.settings import PACKAGED_MODEL
 from service.vgn.checkpoint import card_path, card_summary
-from training.card import build_card, portable_path, write_card
+from training.card import build_card, labelling_hand, portable_path, write_card
 
 
 def test_a_path_inside_the_working_directory_is_written_relative_to_it(tmp_path: Path):
@@ -70,6 +70,7 @@ def test_a_new_card_records_portable_paths_and_no_working_directory(
         threshold=0.8,
     )
     assert "working_directory" not in card
+    assert card["gripper"] is None, "not recorded unless given"
     assert card["datasets"][0] == {"path": "data", "scenes": 3, "cache": "~/.cache/grids"}
     assert card["datasets"][1] == {"path": "raw", "scenes": 2, "cache": "packed shards"}
     assert datasets[0]["path"] == str(work / "data"), "the caller's summaries are left as they were"
@@ -117,3 +118,10 @@ def test_the_shipped_cards_name_no_machine_path():
         assert "working_directory" not in card, path.name
         found = [f"{where}: {text!r}" for where, text in strings(card) if ABSOLUTE_PATH.search(text)]
         assert not found, f"{path.name} names machine paths: {found}"
+
+
+def test_the_card_names_the_hand_of_every_dataset_or_none():
+    assert labelling_hand(["robotiq-2f85-v1", "robotiq-2f85-v1"]) == "robotiq-2f85-v1"
+    assert labelling_hand(["franka-v2", None]) is None, "a dataset made elsewhere: not recorded"
+    with pytest.raises(ValueError, match=r"different hands \(franka-v2, robotiq-2f85-v1\)"):
+        labelling_hand(["robotiq-2f85-v1", "franka-v2", None])

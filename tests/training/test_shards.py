@@ -162,3 +162,26 @@ def test_copies_are_different_draws_of_the_same_scenes(raw: RawDataset, tmp_path
     first, again = data[0], data[len(scenes)]
     assert not torch.equal(first.grid, again.grid) or not torch.equal(first.labels.voxel, again.labels.voxel)
     assert torch.equal(data[0].grid, first.grid), "a draw is fixed by (seed, epoch, index)"
+
+
+def test_training_records_the_hand_that_labelled_the_data_and_refuses_two_hands(
+    raw: RawDataset, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+):
+    folder = ShardFolder(tmp_path / "data")
+    folder.pack(raw, "pile")
+    out = tmp_path / "model" / "vgn.safetensors"
+    args = ["--epochs", "1", "--no-progress", "--threads", "1"]
+    assert train_main(["--data", str(folder.root), "--out", str(out), *args]) == 0
+    card = json.loads(out.with_suffix(".card.json").read_text())
+    assert card["gripper"] == "franka-v2" and card["datasets"][0]["gripper"] == "franka-v2"
+    other = with_generation(make_dataset(tmp_path / "other", scenes=1), gripper="box-v1")
+    mixed = [
+        "--data",
+        str(folder.root),
+        "--data",
+        str(other.root),
+        "--out",
+        str(tmp_path / "mixed.safetensors"),
+    ]
+    assert train_main([*mixed, *args]) == 2
+    assert "labelled by different hands (box-v1, franka-v2)" in capsys.readouterr().err
