@@ -322,6 +322,8 @@ def _status(vgn: VGNClient) -> int:
     print(f"model     {model.model_id or '-'} from {model.source or '-'} on {model.device}")
     if model.one_view is not None:  # answers on volumes fused from one frame
         print(f"one-view  {model.one_view.model_id} from {model.one_view.source}")
+    for hand in model.hand_models:  # answers every session of its hand
+        print(f"hand      {hand.gripper}: {hand.model_id} from {hand.source}")
     return 0 if readiness.ready else 1
 
 

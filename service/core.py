@@ -7,6 +7,9 @@ this and map its ``ServiceError``s to their own codes; nothing here knows about 
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -42,6 +45,7 @@ from vgn_contract.schemas import (
     GraspResult,
     GripperInfo,
     GripperList,
+    HandModel,
     Intrinsics,
     ModelInfo,
     OneViewModel,
@@ -61,20 +65,28 @@ CONVENTIONS = {
 #: Volumes fused from this many frames are the one-view network's (``VGN_ONE_VIEW_MODEL``): one fixed
 #: camera's side view, too little of the surface for the grip check as well (``MIN_GRIP_FRAMES``).
 ONE_VIEW_FRAMES = 1
+#: How ``GET /model`` describes a network besides the main one.
+Described = TypeVar("Described", OneViewModel, HandModel)
 
 
 class PlanningService:
     """Sessions of fused depth frames and VGN grasp planning on them (thread-safe)."""
 
     def __init__(
-        self, settings: Settings, planner: GraspPlanner, one_view: GraspPlanner | None = None
+        self,
+        settings: Settings,
+        planner: GraspPlanner,
+        one_view: GraspPlanner | None = None,
+        hand_networks: Mapping[str, GraspPlanner] | None = None,
     ) -> None:
         self.settings = settings
         self.planner = planner
         #: Answers in ``planner``'s place on one-frame volumes of the default hand (:meth:`network_for`).
         self.one_view = one_view
+        #: Each hand's own network, by hand name: it answers every session of its hand (:meth:`network_for`).
+        self.hand_networks = dict(sorted((hand_networks or {}).items()))
         self.grip_config = GripConfig(preferred_alignment=settings.grip_preferred_alignment)
-        self.hands = Hands.build(settings.grippers, settings.network_grippers)
+        self.hands = Hands.build(settings.grippers, settings.network_grippers, self.hand_networks)
         self.sessions = SessionStore(
             settings.max_sessions,
             settings.session_ttl_s,
@@ -85,9 +97,11 @@ class PlanningService:
 
     @classmethod
     def from_settings(cls, settings: Settings) -> PlanningService:
-        """Load the configured model (raises ``CheckpointError`` if it cannot be loaded)."""
+        """Load the configured networks (``CheckpointError`` for weights that cannot be loaded,
+        ``ValueError`` for a hand setting that names an unknown hand or a file that is no hand)."""
         import torch
 
+        hands = Hands.build(settings.grippers, settings.network_grippers)  # checked before any weights load
         torch.set_num_threads(settings.torch_threads or configured_threads())
         tune_malloc()
         options = InferenceOptions(
@@ -99,7 +113,8 @@ class PlanningService:
             settings.heads,
         )
         planner = GraspPlanner.from_path(settings.model_path(), settings.device, options)
-        return cls(settings, planner, load_one_view(settings, planner))
+        hand_networks = load_hand_networks(settings, hands, planner)
+        return cls(settings, planner, load_one_view(settings, planner), hand_networks)
 
     def close(self) -> None:
         """Free the sessions and end the cloud worker thread (at shutdown)."""
@@ -114,22 +129,32 @@ class PlanningService:
         return self.sessions.create(spec, hand=hand).info(self.sessions.ttl_s)
 
     def grippers(self) -> GripperList:
-        """The hands this service knows, each with the network that serves it (or none)."""
-        network = self.planner.model_id or "vgn (no weights loaded yet)"
+        """The hands this service knows, each with the network that serves it (or none) and that
+        network's operating threshold."""
         return GripperList(
-            grippers=[
-                GripperInfo(
-                    name=name,
-                    version=hand.version,
-                    description=hand.description,
-                    max_opening=hand.max_opening,
-                    finger_depth=hand.finger_depth,
-                    network=network if name in self.hands.served else None,
-                )
-                for name, hand in sorted(self.hands.known.items())
-            ],
+            grippers=[self._gripper_info(name, hand) for name, hand in sorted(self.hands.known.items())],
             default=DEFAULT_GRIPPER,
         )
+
+    def _gripper_info(self, name: str, hand: GripperDescription) -> GripperInfo:
+        """One hand as ``GET /grippers`` lists it."""
+        network = self.served_by(name)
+        return GripperInfo(
+            name=name,
+            version=hand.version,
+            description=hand.description,
+            max_opening=hand.max_opening,
+            finger_depth=hand.finger_depth,
+            network=None if network is None else network.model_id or "vgn (no weights loaded yet)",
+            threshold=None if network is None else network.default_threshold,
+        )
+
+    def served_by(self, name: str) -> GraspPlanner | None:
+        """The network that plans for the hand ``name`` (the main one also on a volume of one
+        frame); ``None`` when none does."""
+        if name not in self.hands.served:
+            return None
+        return self.hand_networks.get(name, self.planner)
 
     def export_session(self, session_id: str) -> bytes:
         """A session's snapshot (``service.snapshot``): its settings, counts and volumes, the
@@ -275,7 +300,8 @@ class PlanningService:
             threshold = config.threshold
         else:
             turn_average = self.settings.turn_average if query.turn_average is None else query.turn_average
-            key = (revision, turn_average)  # one revision: one frame count, so one network
+            # One revision: one frame count and the session's one hand, so one network.
+            key = (revision, turn_average)
             reuse = self.settings.reuse_output and kept is not None and kept[0] == key
             output = kept[1] if reuse else network.infer(observed, turn_average)
             grasps = network.detect(observed, output, voxel_size, workspace_pose, ranked)
@@ -327,8 +353,12 @@ class PlanningService:
 
     def network_for(self, frame_count: int, hand: GripperDescription) -> GraspPlanner:
         """The network for a volume fused from ``frame_count`` frames, planning for ``hand``: the
-        one-view network on one frame of the default hand, whose grasps it was trained on; the main
-        network otherwise, and wherever no one-view network is loaded."""
+        hand's own network whatever the frame count, where it has one; else the one-view network on
+        one frame of the default hand, whose grasps it was trained on; the main network otherwise,
+        and wherever no one-view network is loaded."""
+        own = self.hand_networks.get(hand.name)
+        if own is not None:
+            return own
         one_view = frame_count == ONE_VIEW_FRAMES and hand.name == DEFAULT_GRIPPER
         return self.one_view if one_view and self.one_view is not None else self.planner
 
@@ -374,15 +404,25 @@ class PlanningService:
             defaults=defaults,
             runtime=RuntimeInfo.model_validate({**runtime_report(), **self.planner.runtime(), **repeated}),
             one_view=self._one_view_info(),
+            hand_models=[
+                info
+                for name, network in self.hand_networks.items()
+                if (info := described(network, HandModel, name)) is not None
+            ],
         )
 
     def _one_view_info(self) -> OneViewModel | None:
         """The one-view network as ``GET /model`` reports it; ``None`` when none is loaded."""
-        one_view = self.one_view
-        if one_view is None or one_view.model_id is None or one_view.source is None:
-            return None
-        return OneViewModel(model_id=one_view.model_id, source=one_view.source, threshold=one_view.default_threshold,
-                            gripper=DEFAULT_GRIPPER, card=one_view.card)  # fmt: skip
+        return None if self.one_view is None else described(self.one_view, OneViewModel, DEFAULT_GRIPPER)
+
+
+def described(network: GraspPlanner, model: type[Described], gripper: str) -> Described | None:
+    """A network besides the main one as ``GET /model`` reports it, answering ``gripper``'s
+    sessions; ``None`` without weights."""
+    if network.model_id is None or network.source is None:
+        return None
+    return model(model_id=network.model_id, source=network.source, threshold=network.default_threshold,
+                 gripper=gripper, card=network.card)  # fmt: skip
 
 
 def load_one_view(settings: Settings, main: GraspPlanner) -> GraspPlanner | None:
@@ -396,3 +436,32 @@ def load_one_view(settings: Settings, main: GraspPlanner) -> GraspPlanner | None
         return GraspPlanner.from_path(path, settings.device, main.options, alongside=main)
     except CheckpointError as error:
         raise CheckpointError(f"VGN_ONE_VIEW_MODEL: {error}") from None
+
+
+def load_hand_networks(settings: Settings, hands: Hands, main: GraspPlanner) -> dict[str, GraspPlanner]:
+    """The hands' own networks that ``settings`` name, by hand, each taking turns with ``main``
+    as the one-view network does. A name that is no known hand, a file that cannot be loaded and a
+    card whose data another hand labelled stop the start-up, naming the setting and the hand."""
+    hands.checked("VGN_HAND_MODELS", settings.hand_models)
+    return {
+        name: load_hand_network(name, hands.known[name], path, settings, main)
+        for name, path in settings.hand_model_paths(hands.known).items()
+    }
+
+
+def load_hand_network(
+    name: str, hand: GripperDescription, path: Path, settings: Settings, main: GraspPlanner
+) -> GraspPlanner:
+    """The network at ``path`` for ``hand``, after checking that its card (where it records the
+    hand that labelled its data) names this hand's version: another hand's grasps would be wrong."""
+    try:
+        network = GraspPlanner.from_path(path, settings.device, main.options, alongside=main)
+    except CheckpointError as error:
+        raise CheckpointError(f"VGN_HAND_MODELS: {name}: {error}") from None
+    recorded = (network.card or {}).get("gripper")
+    if recorded is not None and recorded != hand.version:
+        raise CheckpointError(
+            f"VGN_HAND_MODELS: {name}: the card of {path} says its data was labelled by the hand "
+            f"{recorded!r}, but {name} is {hand.version!r}; train a network on {name}'s data"
+        )
+    return network

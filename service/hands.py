@@ -46,28 +46,39 @@ def planning_for(hand: GripperDescription) -> Iterator[GripperDescription]:
 
 @dataclass(frozen=True)
 class Hands:
-    """The hands one service knows, by name, and the names a loaded network serves."""
+    """The hands one service knows, by name, and the names a network serves: the main network's,
+    and those with a network of their own (``VGN_HAND_MODELS``)."""
 
     known: dict[str, GripperDescription]
     served: frozenset[str]
 
     @classmethod
     def build(
-        cls, extra_files: Iterable[Path] = (), network_hands: Iterable[str] = (DEFAULT_GRIPPER,)
+        cls,
+        extra_files: Iterable[Path] = (),
+        network_hands: Iterable[str] = (DEFAULT_GRIPPER,),
+        own_networks: Iterable[str] = (),
     ) -> Hands:
         """The built-in hands plus ``extra_files`` (a name taken twice is an error); the
-        service's network serves ``network_hands`` (whether or not it is loaded yet)."""
+        service's network serves ``network_hands`` (whether or not it is loaded yet), and each of
+        ``own_networks`` has one of its own."""
         known = {name: builtin_gripper(name) for name in builtin_grippers()}
         for path in extra_files:
             description = read_gripper(path)
             if description.name in known:
                 raise ValueError(f"{path}: the gripper name {description.name!r} is taken; rename it")
             known[description.name] = description
-        served = frozenset(network_hands)
-        unknown = sorted(served - set(known))
+        hands = cls(known, frozenset())
+        main = hands.checked("VGN_NETWORK_GRIPPERS", network_hands)
+        return cls(known, main | hands.checked("VGN_HAND_MODELS", own_networks))
+
+    def checked(self, setting: str, names: Iterable[str]) -> frozenset[str]:
+        """``names``, which ``setting`` gives, all known hands (``ValueError`` naming the others)."""
+        named = frozenset(names)
+        unknown = sorted(named - set(self.known))
         if unknown:
-            raise ValueError(f"VGN_NETWORK_GRIPPERS names unknown hands {unknown}; known: {sorted(known)}")
-        return cls(known, served)
+            raise ValueError(f"{setting} names unknown hands {unknown}; known: {sorted(self.known)}")
+        return named
 
     def resolve(self, name: str | None) -> GripperDescription:
         """The hand a new session plans for: ``InvalidInput`` for an unknown name,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Literal
 
@@ -16,6 +17,9 @@ from vgn_contract.schemas import SWITCH_EFFECTS
 PACKAGED_MODEL = Path(__file__).parent / "models" / "vgn.safetensors"
 #: The packaged network for volumes fused from one frame; the default of ``VGN_ONE_VIEW_MODEL``.
 PACKAGED_ONE_VIEW_MODEL = Path(__file__).parent / "models" / "vgn-one-view.safetensors"
+#: The packaged networks of single hands, ``<hand name>.safetensors`` with its card beside it: the
+#: defaults of ``VGN_HAND_MODELS``.
+PACKAGED_HAND_MODELS = Path(__file__).parent / "models" / "grippers"
 #: ``VGN_MODEL=none``: serve without a model (the antipodal planner still works).
 NO_MODEL = "none"
 
@@ -126,7 +130,19 @@ class Settings(BaseSettings):
     network_grippers: list[str] = Field(
         default_factory=lambda: [DEFAULT_GRIPPER],
         description="the hands the loaded network plans for, as a JSON list; a session for any other hand is "
-        "refused. The packaged network was trained for 'franka' only",
+        "refused. The packaged network was trained for 'franka' only. A hand with its own network "
+        "(VGN_HAND_MODELS) gets that one instead",
+    )
+    hand_models: dict[str, Literal["none"] | Path] = Field(
+        default_factory=dict,
+        description="each hand's own network, as a JSON object from a hand name (built in or in VGN_GRIPPERS) "
+        "to weights with their card beside them, or to 'none': "
+        'VGN_HAND_MODELS=\'{"robotiq-2f85": "/models/robotiq.safetensors"}\'. It answers every session of '
+        "that hand, in place of VGN_MODEL's network and the one-view network, at its card's operating "
+        "threshold; a card that records another hand version than the hand's stops the start-up. A hand "
+        f"left out gets the packaged {PACKAGED_HAND_MODELS.relative_to(Path(__file__).parent.parent)}/"
+        "<name>.safetensors where it ships; 'none': no network of its own (VGN_NETWORK_GRIPPERS says whether "
+        "VGN_MODEL's serves it). Not loaded without VGN_MODEL's network",
     )
     max_sessions: int = Field(default=64, ge=1)
     session_ttl_s: float = Field(default=1800.0, gt=0, description="idle seconds before a session expires")
@@ -166,11 +182,16 @@ class Settings(BaseSettings):
     @classmethod
     def _empty_is_unset(cls, value: object) -> object:
         """``VGN_API_KEY=`` or ``VGN_MODEL=`` in an env file means "not set"."""
-        if value == "":
-            return None
-        if isinstance(value, str) and value.strip().lower() == NO_MODEL:
-            return NO_MODEL
-        return value
+        return _weights_setting(value)
+
+    @field_validator("hand_models", mode="before")
+    @classmethod
+    def _hand_none(cls, value: object) -> object:
+        """Each hand's entry read as ``VGN_MODEL`` is (an empty one: unset)."""
+        if not isinstance(value, dict):
+            return value
+        chosen = {hand: _weights_setting(path) for hand, path in value.items()}
+        return {hand: path for hand, path in chosen.items() if path is not None}
 
     def model_path(self) -> Path | None:
         """The weights to load: ``VGN_MODEL``, else the packaged default if it exists; ``None``
@@ -183,6 +204,28 @@ class Settings(BaseSettings):
         if self.model_path() is None:
             return None
         return _weights_path(self.one_view_model, PACKAGED_ONE_VIEW_MODEL)
+
+    def hand_model_paths(self, hands: Iterable[str]) -> dict[str, Path]:
+        """The weights of each of ``hands`` (the names the service knows) that has a network of its
+        own, chosen as :meth:`model_path` chooses, the packaged one being
+        ``PACKAGED_HAND_MODELS/<name>.safetensors``; none without a main network, as for the
+        one-view network. An entry for a name not in ``hands`` is the caller's to refuse."""
+        if self.model_path() is None:
+            return {}
+        chosen = {
+            name: _weights_path(self.hand_models.get(name), PACKAGED_HAND_MODELS / f"{name}.safetensors")
+            for name in sorted(hands)
+        }
+        return {name: path for name, path in chosen.items() if path is not None}
+
+
+def _weights_setting(value: object) -> object:
+    """A weights (or key) setting as given: empty is unset (``None``), ``none`` in any case is ``NO_MODEL``."""
+    if value == "":
+        return None
+    if isinstance(value, str) and value.strip().lower() == NO_MODEL:
+        return NO_MODEL
+    return value
 
 
 def _weights_path(setting: Path | str | None, packaged: Path) -> Path | None:

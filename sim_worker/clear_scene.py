@@ -21,29 +21,32 @@ from sim_worker.hand_urdf import hand_urdf
 from sim_worker.metrics import summary_table
 from sim_worker.results import ResultsFolder, RoundRecord
 from vgn_contract.gripper_description import GripperDescriptionError, default_gripper
-from vgn_contract.schemas import GraspDefaults
+from vgn_contract.schemas import GraspDefaults, OneViewModel
 
 
 def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
-    """``config`` with the planner's identity filled in: the weights' id (a resume with other
-    weights is refused), and for the threshold, turn averaging, clearance and grip checks it leaves
-    unset, what the service's ``/model`` defaults say it will use, so that config.json records what
-    is done. Requests still leave those options to the service (``left_to_service``), and each answer
-    is checked against the record."""
+    """``config`` with the planner's identity filled in: the id of the weights that answer the run's
+    hand (its own network where the service has one, else the main one; a resume with other weights
+    is refused), and for the threshold, turn averaging, clearance and grip checks it leaves unset,
+    what the service's ``/model`` says it will use, so that config.json records what is done.
+    Requests still leave those options to the service (``left_to_service``), and each answer is
+    checked against the record."""
     model = vgn.model()
     defaults = known_defaults(model.defaults)
     left = config.left_to_service | {name for name in SERVICE_OPTIONS if getattr(config, name) is None}
     clearance = defaults.clearance if config.clearance is None else config.clearance
     grip = defaults.grip if config.grip is None else config.grip
     if config.planner == "vgn":
-        threshold = defaults.threshold if config.threshold is None else config.threshold
+        own = model.hand_model(config.hand.name)  # it answers every look, at its own threshold
+        network_threshold = defaults.threshold if own is None else own.threshold
+        threshold = network_threshold if config.threshold is None else config.threshold
         turns = defaults.turn_average if config.turn_average is None else config.turn_average
         # The service falls back only for requests that name no threshold and run a check.
         floor = defaults.fallback_threshold if config.threshold is None and (clearance or grip) else None
-        one_view = model.one_view
+        one_view = model.one_view if own is None and _one_view_answers(model.one_view, config) else None
         return dataclasses.replace(
             config,
-            model=model.model_id,
+            model=model.model_id if own is None else own.model_id,
             one_view_model=one_view.model_id if one_view is not None else None,
             one_view_threshold=(one_view.threshold if config.threshold is None else config.threshold)
             if one_view is not None
@@ -58,6 +61,11 @@ def resolve_planner(config: ClutterConfig, vgn: VGNClient) -> ClutterConfig:
     threshold = defaults.antipodal_threshold if config.threshold is None else config.threshold
     return dataclasses.replace(config, model="antipodal", threshold=threshold, turn_average=False,
                                clearance=clearance, grip=grip, left_to_service=left)  # fmt: skip
+
+
+def _one_view_answers(one_view: OneViewModel | None, config: ClutterConfig) -> bool:
+    """Whether the one-view network answers the run's one-frame looks: only its hand's."""
+    return one_view is not None and one_view.gripper == config.hand.name
 
 
 def grasp_defaults(config: ClutterConfig | None, vgn: VGNClient) -> GraspDefaults:

@@ -144,8 +144,9 @@ def _check_settings(out: Path, config: DataGenConfig) -> int:
 def _with_answer_model(
     url: str, api_key: str | None, out: Path, config: DataGenConfig
 ) -> tuple[DataGenConfig, int]:
-    """``config`` naming the weights the service at ``url`` answers with, its settings checked: a
-    folder holds one model's answers, so a resume with other weights is refused."""
+    """``config`` naming the weights the service at ``url`` answers the run's hand with (its own
+    network where it has one), its settings checked: a folder holds one model's answers, so a
+    resume with other weights is refused."""
     from client.connect import connect
 
     with connect(url, api_key=api_key, timeout=120.0) as vgn:
@@ -154,7 +155,8 @@ def _with_answer_model(
         print(f"error: --answer-grasps labels the network's answers, but the service has no model ({info.detail})",
               file=sys.stderr)  # fmt: skip
         return config, 2
-    config = dataclasses.replace(config, answer_model=info.model_id)
+    own = info.hand_model(config.hand.name)
+    config = dataclasses.replace(config, answer_model=info.model_id if own is None else own.model_id)
     return config, _check_settings(out, config)
 
 

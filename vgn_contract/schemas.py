@@ -448,7 +448,13 @@ class GripperInfo(_Model):
         description="from the grasp frame's origin to the fingertips along the approach (m)"
     )
     network: str | None = Field(
-        description="id of the network that plans for this hand; null: none, and a session for it is refused"
+        description="id of the network that plans for this hand: its own (VGN_HAND_MODELS) where it has one, "
+        "else the main one; null: none, and a session for it is refused"
+    )
+    threshold: float | None = Field(
+        default=None,
+        description="that network's operating threshold, which a vgn request that gives none gets; null: no "
+        "network, or a service older than this field",
     )
 
 
@@ -532,10 +538,13 @@ class RuntimeInfo(_Model):
     fallback_threshold: float | None = _moved_to_defaults("fallback_threshold")
 
 
-class OneViewModel(_Model):
-    """The network that answers vgn requests on volumes fused from one frame in place of the main one: from
-    one fixed camera the fused surface is a single noisy side view, which a network trained on such
-    views reads better."""
+def _network_card() -> Any:
+    """The ``card`` field of a network besides the main one."""
+    return Field(default=None, description="from its model card, as ModelInfo's card, when there is one")
+
+
+class _OtherNetwork(_Model):
+    """A network the service loads besides the main one (``VGN_MODEL``)."""
 
     model_id: str = Field(description="sha256 prefix of its weights file: the model its answers name")
     source: str = Field(description="where its weights were loaded from")
@@ -543,10 +552,24 @@ class OneViewModel(_Model):
         description="threshold of its requests that give none: its card's operating threshold, "
         f"else {VGN_DEFAULT_THRESHOLD} (VGN's)"
     )
+
+
+class OneViewModel(_OtherNetwork):
+    """The network that answers vgn requests on volumes fused from one frame in place of the main one: from
+    one fixed camera the fused surface is a single noisy side view, which a network trained on such
+    views reads better."""
+
     gripper: str = Field(description="the hand whose sessions it answers; other hands' get the main network")
-    card: dict[str, Any] | None = Field(
-        default=None, description="from its model card, as ModelInfo's card, when there is one"
-    )
+    card: dict[str, Any] | None = _network_card()
+
+
+class HandModel(_OtherNetwork):
+    """A hand's own network (VGN_HAND_MODELS): it answers every vgn request on that hand's sessions, in place
+    of the main and the one-view network, since a network's grasps are what the hand it was trained for can
+    do."""
+
+    gripper: str = Field(description="the hand whose sessions it answers, whatever their frame count")
+    card: dict[str, Any] | None = _network_card()
 
 
 class ModelInfo(_Model):
@@ -564,7 +587,8 @@ class ModelInfo(_Model):
     card: dict[str, Any] | None = Field(
         default=None,
         description="from the model card beside the weights (<name>.card.json), when there is one: "
-        "training date, scenes and grasps, epochs, the shipped epoch with its optimizer steps and validation "
+        "training date, scenes and grasps, the version of the hand that labelled them (gripper; null: not "
+        "recorded), epochs, the shipped epoch with its optimizer steps and validation "
         "figures, the executed-grasp result of a clear-scene run, the command that reproduces them",
     )
     defaults: GraspDefaults | None = Field(
@@ -583,6 +607,16 @@ class ModelInfo(_Model):
         description="the network that answers vgn requests on volumes fused from one frame "
         "(VGN_ONE_VIEW_MODEL); null: the main network answers those too, or a service older than this field",
     )
+    hand_models: list[HandModel] = Field(
+        default_factory=list,
+        description="the hands' own networks (VGN_HAND_MODELS), by hand name; empty: none, or a service older "
+        "than this field",
+    )
+
+    def hand_model(self, gripper: str) -> HandModel | None:
+        """The network of ``gripper``'s own, which answers every session of that hand; ``None``
+        when it has none (the main network, or no network, serves it)."""
+        return next((network for network in self.hand_models if network.gripper == gripper), None)
 
     @model_validator(mode="after")
     def _repeat_the_threshold(self) -> ModelInfo:

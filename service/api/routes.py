@@ -125,7 +125,9 @@ def model(service: Core) -> ModelInfo:
 @api.get("/grippers", response_model=GripperList)
 def grippers(service: Core) -> GripperList:
     """The hands this service knows (built in, and the operator's `VGN_GRIPPERS` files), each with
-    the network that plans for it; a session names one (`gripper`), a hand with no network is refused."""
+    the network that plans for it (its own, `VGN_HAND_MODELS`, where it has one, else the main one)
+    and that network's operating threshold; a session names one (`gripper`), a hand with no network
+    is refused."""
     return service.grippers()
 
 

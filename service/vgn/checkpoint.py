@@ -40,7 +40,8 @@ def card_path(weights: Path) -> Path:
 
 def card_summary(weights: Path, content_id: str | None = None) -> dict[str, Any] | None:
     """What ``GET /model`` tells about the weights from their card: when and on what they were
-    trained, their validation figures and the command that reproduces them. ``None`` without a
+    trained (and the version of the hand that labelled that data, ``None`` where the card does not
+    record it), their validation figures and the command that reproduces them. ``None`` without a
     readable card (weights from elsewhere need none). ``content_id``: the weights' id, when the
     caller already has it (saves hashing the file again)."""
     try:
@@ -61,6 +62,7 @@ def card_summary(weights: Path, content_id: str | None = None) -> dict[str, Any]
         "grasps": sum(int(d.get("grasps", 0)) for d in datasets if isinstance(d, dict)),
         "epochs": card.get("epochs"),
         "threshold": card.get("threshold"),
+        "gripper": card.get("gripper"),
         "epoch": shipped.get("epoch"),
         "steps": shipped.get("steps"),
         "validation": shipped.get("val"),

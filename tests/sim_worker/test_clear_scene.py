@@ -13,6 +13,7 @@ from sim_worker.clutter import camera_views
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 from tests.helpers.runs import check_results, clear_scene, read_csv
+from vgn_contract.gripper_description import builtin_gripper
 from vgn_contract.schemas import GraspDefaults, GraspResult, ModelInfo, OneViewModel
 
 VGN_COLUMNS = ["round_id", "scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "score", "label",
@@ -330,6 +331,10 @@ def test_the_one_view_network_is_recorded_and_its_answers_checked_against_its_th
     named = resolve_planner(ClutterConfig(threshold=0.7), ServiceDefaults(BEST, one_view))
     assert named.one_view_threshold == 0.7
     assert "one_view_model" not in resolve_planner(ClutterConfig(), ServiceDefaults(BEST)).as_json()
+    other_hand = ClutterConfig(views="side", hand=builtin_gripper("robotiq-2f85"))
+    assert "one_view_model" not in resolve_planner(other_hand, ServiceDefaults(BEST, one_view)).as_json(), (
+        "it answers the default hand's sessions only"
+    )
 
 
 def test_benchmark_runs_with_turn_averaging_are_kept_apart_and_labelled(tmp_path: Path):

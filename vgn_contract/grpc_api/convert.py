@@ -7,9 +7,10 @@ HTTP API, so both front ends accept and reject exactly the same input with the s
 from __future__ import annotations
 
 import json
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
+from google.protobuf.message import Message
 
 from vgn_contract.grpc_api import grasp_planning_pb2 as pb
 from vgn_contract.schemas import (
@@ -19,6 +20,7 @@ from vgn_contract.schemas import (
     GraspResult,
     GripperInfo,
     GripperList,
+    HandModel,
     Intrinsics,
     ModelInfo,
     OneViewModel,
@@ -29,6 +31,8 @@ from vgn_contract.schemas import (
     Workspace,
 )
 
+#: The networks a ``ModelInfo`` lists besides the main one.
+Network = TypeVar("Network", OneViewModel, HandModel)
 RAW_MEDIA_TYPE = "application/octet-stream"
 PNG_MEDIA_TYPE = "image/png"
 MEDIA_TYPE_OF_ENCODING = {
@@ -209,17 +213,21 @@ def gripper_list_message(hands: GripperList) -> pb.GripperList:
 
 def model_info_message(info: ModelInfo) -> pb.ModelInfo:
     """The service's ``ModelInfo`` as a reply; the free-form card and the runtime travel as JSON text."""
-    data = info.model_dump(exclude={"card", "runtime", "defaults", "one_view"}, exclude_none=True)
+    data = info.model_dump(
+        exclude={"card", "runtime", "defaults", "one_view", "hand_models"}, exclude_none=True
+    )
     runtime_json = None if info.runtime is None else info.runtime.model_dump_json()
     defaults = None if info.defaults is None else pb.GraspDefaults(**info.defaults.model_dump())
-    one_view = None if info.one_view is None else one_view_message(info.one_view)
+    one_view = None if info.one_view is None else network_message(info.one_view, pb.OneViewModel)
+    hand_models = [network_message(network, pb.HandModel) for network in info.hand_models]
     return pb.ModelInfo(card_json=_card_json(info.card), runtime_json=runtime_json, defaults=defaults,
-                        one_view=one_view, **data)  # fmt: skip
+                        one_view=one_view, hand_models=hand_models, **data)  # fmt: skip
 
 
-def one_view_message(one_view: OneViewModel) -> pb.OneViewModel:
-    """The one-view network of a ``ModelInfo`` as its message, the card as JSON text as the main one's."""
-    return pb.OneViewModel(card_json=_card_json(one_view.card), **one_view.model_dump(exclude={"card"}))
+def network_message(network: OneViewModel | HandModel, message_type: type[Message]) -> Message:
+    """A network of a ``ModelInfo`` besides the main one as its message (``pb.OneViewModel`` or
+    ``pb.HandModel``, field for field), the card as JSON text as the main one's."""
+    return message_type(card_json=_card_json(network.card), **network.model_dump(exclude={"card"}))
 
 
 def _card_json(card: dict[str, Any] | None) -> str | None:
@@ -307,6 +315,7 @@ def gripper_list(message: pb.GripperList) -> GripperList:
             max_opening=g.max_opening,
             finger_depth=g.finger_depth,
             network=g.network if g.HasField("network") else None,
+            threshold=g.threshold if g.HasField("threshold") else None,
         )  # fmt: skip
         for g in message.grippers
     ]
@@ -334,15 +343,16 @@ def model_info(message: pb.ModelInfo) -> ModelInfo:
         runtime=RuntimeInfo.model_validate_json(message.runtime_json)
         if message.HasField("runtime_json")
         else None,
-        one_view=one_view(message.one_view) if message.HasField("one_view") else None,
+        one_view=network(message.one_view, OneViewModel) if message.HasField("one_view") else None,
+        hand_models=[network(hand, HandModel) for hand in message.hand_models],
     )
 
 
-def one_view(message: pb.OneViewModel) -> OneViewModel:
-    """A ``OneViewModel`` message as the client's model, its card decoded from JSON."""
+def network(message: pb.OneViewModel | pb.HandModel, model: type[Network]) -> Network:
+    """A ``OneViewModel`` or ``HandModel`` message as the client's ``model``, its card decoded from JSON."""
     card = json.loads(message.card_json) if message.HasField("card_json") else None
-    fields = {name: getattr(message, name) for name in OneViewModel.model_fields if name != "card"}
-    return OneViewModel(card=card, **fields)
+    fields = {name: getattr(message, name) for name in model.model_fields if name != "card"}
+    return model(card=card, **fields)
 
 
 def grasp_defaults(message: pb.GraspDefaults) -> GraspDefaults:

@@ -304,20 +304,22 @@ class ListGrippersRequest(_message.Message):
     def __init__(self) -> None: ...
 
 class GripperInfo(_message.Message):
-    __slots__ = ("name", "version", "description", "max_opening", "finger_depth", "network")
+    __slots__ = ("name", "version", "description", "max_opening", "finger_depth", "network", "threshold")
     NAME_FIELD_NUMBER: _ClassVar[int]
     VERSION_FIELD_NUMBER: _ClassVar[int]
     DESCRIPTION_FIELD_NUMBER: _ClassVar[int]
     MAX_OPENING_FIELD_NUMBER: _ClassVar[int]
     FINGER_DEPTH_FIELD_NUMBER: _ClassVar[int]
     NETWORK_FIELD_NUMBER: _ClassVar[int]
+    THRESHOLD_FIELD_NUMBER: _ClassVar[int]
     name: str
     version: str
     description: str
     max_opening: float
     finger_depth: float
     network: str
-    def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., description: _Optional[str] = ..., max_opening: _Optional[float] = ..., finger_depth: _Optional[float] = ..., network: _Optional[str] = ...) -> None: ...
+    threshold: float
+    def __init__(self, name: _Optional[str] = ..., version: _Optional[str] = ..., description: _Optional[str] = ..., max_opening: _Optional[float] = ..., finger_depth: _Optional[float] = ..., network: _Optional[str] = ..., threshold: _Optional[float] = ...) -> None: ...
 
 class GripperList(_message.Message):
     __slots__ = ("grippers", "default")
@@ -328,7 +330,7 @@ class GripperList(_message.Message):
     def __init__(self, grippers: _Optional[_Iterable[_Union[GripperInfo, _Mapping]]] = ..., default: _Optional[str] = ...) -> None: ...
 
 class ModelInfo(_message.Message):
-    __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json", "defaults", "one_view")
+    __slots__ = ("loaded", "model_id", "source", "architecture", "parameters", "device", "detail", "conventions", "threshold", "card_json", "runtime_json", "defaults", "one_view", "hand_models")
     class ConventionsEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -349,6 +351,7 @@ class ModelInfo(_message.Message):
     RUNTIME_JSON_FIELD_NUMBER: _ClassVar[int]
     DEFAULTS_FIELD_NUMBER: _ClassVar[int]
     ONE_VIEW_FIELD_NUMBER: _ClassVar[int]
+    HAND_MODELS_FIELD_NUMBER: _ClassVar[int]
     loaded: bool
     model_id: str
     source: str
@@ -362,9 +365,24 @@ class ModelInfo(_message.Message):
     runtime_json: str
     defaults: GraspDefaults
     one_view: OneViewModel
-    def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ..., defaults: _Optional[_Union[GraspDefaults, _Mapping]] = ..., one_view: _Optional[_Union[OneViewModel, _Mapping]] = ...) -> None: ...
+    hand_models: _containers.RepeatedCompositeFieldContainer[HandModel]
+    def __init__(self, loaded: _Optional[bool] = ..., model_id: _Optional[str] = ..., source: _Optional[str] = ..., architecture: _Optional[str] = ..., parameters: _Optional[int] = ..., device: _Optional[str] = ..., detail: _Optional[str] = ..., conventions: _Optional[_Mapping[str, str]] = ..., threshold: _Optional[float] = ..., card_json: _Optional[str] = ..., runtime_json: _Optional[str] = ..., defaults: _Optional[_Union[GraspDefaults, _Mapping]] = ..., one_view: _Optional[_Union[OneViewModel, _Mapping]] = ..., hand_models: _Optional[_Iterable[_Union[HandModel, _Mapping]]] = ...) -> None: ...
 
 class OneViewModel(_message.Message):
+    __slots__ = ("model_id", "source", "threshold", "gripper", "card_json")
+    MODEL_ID_FIELD_NUMBER: _ClassVar[int]
+    SOURCE_FIELD_NUMBER: _ClassVar[int]
+    THRESHOLD_FIELD_NUMBER: _ClassVar[int]
+    GRIPPER_FIELD_NUMBER: _ClassVar[int]
+    CARD_JSON_FIELD_NUMBER: _ClassVar[int]
+    model_id: str
+    source: str
+    threshold: float
+    gripper: str
+    card_json: str
+    def __init__(self, model_id: _Optional[str] = ..., source: _Optional[str] = ..., threshold: _Optional[float] = ..., gripper: _Optional[str] = ..., card_json: _Optional[str] = ...) -> None: ...
+
+class HandModel(_message.Message):
     __slots__ = ("model_id", "source", "threshold", "gripper", "card_json")
     MODEL_ID_FIELD_NUMBER: _ClassVar[int]
     SOURCE_FIELD_NUMBER: _ClassVar[int]
