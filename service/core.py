@@ -25,6 +25,7 @@ from service.planner import (
     GraspPlanner,
     InferenceOptions,
     antipodal_config,
+    in_requested_region,
     resolved_threshold,
 )
 from service.runtime import configured_threads, runtime_report, tune_malloc
@@ -310,8 +311,8 @@ class PlanningService:
             model = network.model_id or ""
             threshold = resolved_threshold(query, network.default_threshold)
 
-        def checked_of(candidates: list[Grasp]) -> Checked:
-            return check_grasps(candidates, surface, grid, voxel_size, workspace_pose, workspace_size,
+        def checked_of(candidates: list[Grasp], grip_grid: np.ndarray | None = grid) -> Checked:
+            return check_grasps(candidates, surface, grip_grid, voxel_size, workspace_pose, workspace_size,
                                 self.grip_config, self.settings.alternatives)  # fmt: skip
 
         checked = checked_of(grasps)
@@ -329,12 +330,14 @@ class PlanningService:
                 # Still nothing: the pairs the observed surface offers, under the same checks.
                 with self.sessions.use(session_id) as session:
                     cloud = session.volume.cloud()
+                # The pairs passed their own antipodal test on the fine cloud: the grip check's
+                # coarse grid misses thin walls that the pads meet squarely, so only clearance runs.
                 pairs = checked_of(
-                    plan_antipodal(cloud, workspace_pose, antipodal_config(lower), session_hand)
+                    plan_antipodal(cloud, workspace_pose, antipodal_config(lower), session_hand), None
                 )
                 if pairs.grasps:
                     checked, model = pairs, "antipodal"
-        grasps = checked.grasps[: query.max_grasps]
+        grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
         return GraspResult(
             grasps=grasps,
             planning_ms=round((time.perf_counter() - started) * 1e3, 3),

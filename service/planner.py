@@ -12,8 +12,10 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig
+from service.baseline.antipodal import in_region
 from service.errors import ModelNotReady
 from service.runtime import usable_cores
 from service.vgn.batching import MicroBatcher
@@ -60,6 +62,18 @@ def antipodal_config(query: GraspQuery) -> AntipodalConfig:
         approach=detection.approach,
         max_approach_angle_rad=detection.max_approach_angle_rad,
     )
+
+
+def in_requested_region(grasps: list[Grasp], query: GraspQuery, workspace_pose: np.ndarray) -> list[Grasp]:
+    """The ``grasps`` (world frame) that lie in the request's crop box and approach cone: the
+    planners apply both, but a check's alternative pose (turned, tilted, stepped back) can leave them."""
+    config = detection_config(query, 0.0)
+    if not grasps or (config.crop_min is None and config.crop_max is None and config.approach is None):
+        return grasps
+    positions = np.array([g.position for g in grasps], dtype=np.float64)
+    approaches = Rotation.from_quat([g.orientation for g in grasps]).as_matrix()[:, :, 2]
+    keep = in_region(positions, approaches, workspace_pose, config)
+    return [grasp for grasp, inside in zip(grasps, keep, strict=True) if inside]
 
 
 def resolve_device(name: str) -> torch.device:

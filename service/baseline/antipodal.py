@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -21,9 +22,14 @@ from scipy.spatial.transform import Rotation
 from vgn_contract.gripper_description import GripperDescription, default_gripper
 from vgn_contract.schemas import Grasp
 
+if TYPE_CHECKING:
+    from service.vgn.detection import DetectionConfig
+
 # The steps, per seed:
-# 1. ``seeds`` surface points whose normal is not pointing down (n_z > -0.1) are drawn with a
-#    seeded generator.
+# 1. ``seeds`` surface points whose normal neither points down (n_z > -0.1) nor up more steeply than
+#    the friction cone (n_z < cos ``friction_angle``: their opposite face would look down, which a
+#    camera above a table seldom sees; the table top is such a point) are drawn with a seeded
+#    generator.
 # 2. The closing axis y is the seed's normal, so the seed lies on the +y jaw. ``approaches``
 #    approach directions z are spread evenly around y, starting from the one closest to straight
 #    down; x = y × z.
@@ -31,8 +37,10 @@ from vgn_contract.schemas import Grasp
 #    region (|x| <= half the pad's width, 0 <= z <= the finger depth, within the opening towards -y)
 #    are collected. With at least ``min_points`` of them, the closed width is their y-extent + 2 mm
 #    (reject above the maximum opening) and the hand is centred on them along y.
-# 4. Antipodal test: of the points within 3 mm of each jaw, at least ``min_cone_fraction`` must have
-#    normals within ``friction_angle`` of the jaw's outward direction (+y, -y).
+# 4. Antipodal test: the points within 3 mm of each jaw that face it (n · y > 0 at the +y jaw, < 0 at
+#    the -y jaw: the far side of a thin wall faces away) must have a mean normal within
+#    ``friction_angle`` of the jaw's outward direction (+y, -y). The mean, not each point: on a
+#    curved face the normals about the contact tilt both ways and cancel, on a slanted face not.
 # 5. Collision test against the cloud (the table is part of it): no point may lie in either finger
 #    (box fingers :data:`FINGER_THICKNESS` thick along y, as wide as the pad along x, the finger depth
 #    long) or in the palm box (:data:`PALM_HALF_X` deep along x, as wide and tall as the hand's palm,
@@ -101,7 +109,6 @@ class AntipodalConfig:
     random_seed: int = 0
     min_points: int = 5
     friction_angle: float = math.radians(30.0)
-    min_cone_fraction: float = 0.7
     nms_distance: float = 0.01
     nms_angle: float = math.radians(20.0)
     threshold: float = 0.0
@@ -130,7 +137,9 @@ def plan_antipodal(
     points, normals = cloud[:, :3], cloud[:, 3:]
     normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     floor = points[:, 2].min() + TABLE_CLEARANCE
-    candidates = np.flatnonzero(normals[:, 2] > -0.1)
+    # A seed facing up steeper than the friction cone needs an opposite face looking down, which a
+    # camera above a table seldom sees: such seeds (the table top among them) are not drawn.
+    candidates = np.flatnonzero((normals[:, 2] > -0.1) & (normals[:, 2] < math.cos(config.friction_angle)))
     if not len(candidates):
         return []
     rng = np.random.default_rng(config.random_seed)
@@ -189,6 +198,7 @@ def _grasps_at_seed(
     a0 /= np.linalg.norm(a0)
     v = np.cross(y, a0)
     pu, pv = rel @ a0, rel @ v
+    nu, nv = normals[near] @ a0, normals[near] @ v
     far = None  # the palm's (larger) neighbourhood, computed only when needed
     tips = np.asarray(config.depths)[:, None]  # (D, 1) fingertip offset past the seed along z
     results = []
@@ -197,6 +207,7 @@ def _grasps_at_seed(
         px_all = c * pv - s * pu  # x = y × z with z = c a0 + s v
         slab = np.abs(px_all) <= finger_half_width
         pz, qy, qn = (c * pu + s * pv)[slab], py[slab], ny[slab]
+        qa, qv = nu[slab], nv[slab]
         along = (pz <= tips) & (pz >= tips - finger_depth)  # (D, S) between finger bases and tips
         closing = along & (qy >= -max_opening - WIDTH_MARGIN) & (qy <= WIDTH_MARGIN / 2)
         count = closing.sum(axis=1)
@@ -208,11 +219,11 @@ def _grasps_at_seed(
             continue
         centre = np.where(valid, (y_max + y_min) / 2, 0.0)
         half = np.where(valid, width / 2, 0.0)
-        hi_jaw = closing & (qy >= y_max[:, None] - JAW_TOLERANCE)
-        lo_jaw = closing & (qy <= y_min[:, None] + JAW_TOLERANCE)
+        hi_jaw = closing & (qy >= y_max[:, None] - JAW_TOLERANCE) & (qn > 0.0)
+        lo_jaw = closing & (qy <= y_min[:, None] + JAW_TOLERANCE) & (qn < 0.0)
         hi_n, lo_n = np.maximum(hi_jaw.sum(axis=1), 1), np.maximum(lo_jaw.sum(axis=1), 1)
-        valid &= (hi_jaw & (qn >= cos_cone)).sum(axis=1) >= config.min_cone_fraction * hi_n
-        valid &= (lo_jaw & (qn <= -cos_cone)).sum(axis=1) >= config.min_cone_fraction * lo_n
+        valid &= _mean_normal_cosine(hi_jaw, qn, qa, qv) >= cos_cone
+        valid &= _mean_normal_cosine(lo_jaw, -qn, qa, qv) >= cos_cone
         offset = np.abs(qy - centre[:, None])
         fingers = along & (offset >= half[:, None]) & (offset <= half[:, None] + FINGER_THICKNESS)
         valid &= ~fingers.any(axis=1)
@@ -243,6 +254,15 @@ def _grasps_at_seed(
         quality = antipodality * (1 - 0.05 * width[d] / max_opening) * (0.9 + 0.1 * downness)
         results.append((quality, position, np.column_stack([x_axis, y, z_axis]), width[d]))
     return results
+
+
+def _mean_normal_cosine(jaw: np.ndarray, ny: np.ndarray, nu: np.ndarray, nv: np.ndarray) -> np.ndarray:
+    """Per depth, the cosine between the mean normal of the ``jaw`` points and +y (``ny``, ``nu``,
+    ``nv``: the normals' components along y and two axes across it): a curved face's tilts about
+    the contact cancel, a slanted face's do not."""
+    count = np.maximum(jaw.sum(axis=1), 1)
+    my, mu, mv = ((jaw * n).sum(axis=1) / count for n in (ny, nu, nv))
+    return my / np.maximum(np.sqrt(my**2 + mu**2 + mv**2), 1e-12)
 
 
 def _lowest_z(
@@ -292,7 +312,18 @@ def _filters(
     workspace_pose: np.ndarray,
     config: AntipodalConfig,
 ) -> np.ndarray:
-    keep = quality >= config.threshold
+    return (quality >= config.threshold) & in_region(positions, rotations[:, :, 2], workspace_pose, config)
+
+
+def in_region(
+    positions: np.ndarray,
+    approaches: np.ndarray,
+    workspace_pose: np.ndarray,
+    config: AntipodalConfig | DetectionConfig,
+) -> np.ndarray:
+    """Which grasps ((G, 3) world positions, (G, 3) approach directions) lie in ``config``'s crop
+    box (workspace frame) and approach cone; all where it sets neither."""
+    keep = np.ones(len(positions), dtype=bool)
     if config.crop_min is not None or config.crop_max is not None:
         pose = np.asarray(workspace_pose, dtype=np.float64)
         local = (positions - pose[:3, 3]) @ pose[:3, :3]  # world → workspace
@@ -303,7 +334,7 @@ def _filters(
     if config.approach is not None and config.max_approach_angle_rad is not None:
         direction = np.asarray(config.approach, dtype=np.float64)
         direction /= np.linalg.norm(direction)
-        cosine = np.clip(rotations[:, :, 2] @ direction, -1.0, 1.0)
+        cosine = np.clip(approaches @ direction, -1.0, 1.0)
         keep &= np.arccos(cosine) <= config.max_approach_angle_rad
     return keep
 

@@ -147,9 +147,11 @@ def test_when_the_fallback_offers_nothing_the_surfaces_antipodal_pairs_are_check
         assert answer.grasps and answer.model == "antipodal"
         with service.sessions.use(session) as state:
             surface = state.volume.surface_points()
-        again = check_grasps(answer.grasps, surface, service.grid(session), VOXEL, np.eye(4), SIZE,
-                             service.grip_config, alternatives=False)  # fmt: skip
-        assert again.grasps == answer.grasps  # each passes the checks as it is offered
+        # Each passes the clearance check as it is offered; the grip check is not theirs to pass:
+        # the pairs met their own antipodal test on the fine cloud, where the coarse grid blurs thin walls.
+        again = check_grasps(answer.grasps, surface, None, VOXEL, np.eye(4), SIZE, service.grip_config,
+                             alternatives=False)  # fmt: skip
+        assert again.grasps == answer.grasps and answer.grip_dropped is None  # the grip check did not run
         named = service.plan(session, GraspQuery(threshold=0.8))
         assert named.grasps == [] and named.model == service.planner.model_id  # a named threshold: neither
     finally:
