@@ -110,8 +110,9 @@ class Settings(BaseSettings):
         default=True,
         description="when even the fallback threshold leaves a VGN request that names no threshold with no "
         "grasp that passes the checks, answer with the antipodal pairs of the observed surface that pass "
-        "them (the answer's model says 'antipodal'): the network's few confident locations on a shape it "
-        "does not know can all fail a check while the surface still offers a grip",
+        "the clearance check (the answer's model says 'antipodal'; their own antipodal test on the fine cloud "
+        "stands in for the grip check): the network's few confident locations on a shape it does not know "
+        "can all fail a check while the surface still offers a grip",
     )
     grip_preferred_alignment: float = Field(
         default=GripConfig().preferred_alignment,
