@@ -324,19 +324,18 @@ class PlanningService:
             # Nothing passed at the operating threshold: rather than leave the robot with nothing to
             # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
             lower = ranked.model_copy(update={"threshold": floor})
-            checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
             threshold = floor
-            if not checked.grasps and self.settings.surface_fallback:
-                # Still nothing: the pairs the observed surface offers, under the same checks.
+            pairs = None
+            if self.settings.surface_fallback:
                 with self.sessions.use(session_id) as session:
                     cloud = session.volume.cloud()
-                # The pairs passed their own antipodal test on the fine cloud: the grip check's
-                # coarse grid misses thin walls that the pads meet squarely, so only clearance runs.
                 pairs = checked_of(
                     plan_antipodal(cloud, workspace_pose, antipodal_config(lower), session_hand), None
                 )
-                if pairs.grasps:
-                    checked, model = pairs, "antipodal"
+            if pairs is not None and pairs.grasps:
+                checked, model = pairs, "antipodal"
+            else:
+                checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
         grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
         return GraspResult(
             grasps=grasps,
