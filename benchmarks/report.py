@@ -236,6 +236,9 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("surface-default-", "What does answering with the observed surface's antipodal pairs, when the network offers "
                          "nothing that passes the checks, add to the default request? (Runs that newer results "
                          "replace in the README's table.)"),
+    ("surface-facing-", "Do antipodal pairs judged by the points that face each jaw (their mean normal, as on a cup's "
+                        "curved wall) reach the objects that ended rounds with nothing offered, and does the "
+                        "antipodal baseline gain from them too?"),
     ("support-table-default-", "What does letting the fingertips meet the table in the last centimetre of the approach add "
                                "to the support plane? (Runs that newer results replace in the README's table.)"),
     ("table-contact-", "When the fingertips graze the table under a flat object, does a step back or a larger "

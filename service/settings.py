@@ -103,16 +103,18 @@ class Settings(BaseSettings):
         le=1.0,
         description="when a VGN request that names no threshold finds no grasp that passes the checks at "
         "the model's operating threshold, answer with the grasps that pass them down to this quality "
-        "(the answer's threshold says which applied), so that a robot is not left with nothing to do while "
-        "objects remain; 1 answers with none",
+        "(the answer's threshold says which applied; the surface's antipodal pairs come first, "
+        "VGN_SURFACE_FALLBACK), so that a robot is not left with nothing to do while objects remain; 1 "
+        "answers with none",
     )
     surface_fallback: bool = Field(
         default=True,
-        description="when even the fallback threshold leaves a VGN request that names no threshold with no "
-        "grasp that passes the checks, answer with the antipodal pairs of the observed surface that pass "
-        "the clearance check (the answer's model says 'antipodal'; their own antipodal test on the fine cloud "
-        "stands in for the grip check): the network's few confident locations on a shape it does not know "
-        "can all fail a check while the surface still offers a grip",
+        description="when a VGN request that names no threshold finds no grasp that passes the checks at the "
+        "model's operating threshold, answer first with the antipodal pairs of the observed surface that "
+        "pass the clearance check (the answer's model says 'antipodal'; their own antipodal test on the fine "
+        "cloud stands in for the grip check), and only where there are none with the network's grasps down "
+        "to VGN_FALLBACK_THRESHOLD: the network's few confident locations on a shape it does not know can "
+        "all fail a check while the surface still offers a grip",
     )
     grip_preferred_alignment: float = Field(
         default=GripConfig().preferred_alignment,
