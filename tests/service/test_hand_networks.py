@@ -14,25 +14,19 @@ from pathlib import Path
 import pytest
 from safetensors.torch import load_file, save_file
 
-from client.grpc_client import GRPCClient
-from client.http import VGNClient
 from service.core import PlanningService
 from service.errors import GripperNotServed
 from service.launch.embedded import EmbeddedService
 from service.settings import Settings
 from service.vgn.checkpoint import CheckpointError, card_path, weights_id
-from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
+from tests.helpers.scenes import INTRINSICS
+from tests.service.test_one_view import DEPTHS, POSES, answers_by_frames
 from vgn_contract.gripper_description import builtin_gripper
 from vgn_contract.schemas import SessionCreate
 
-SCENE = BoxScene()
-POSES = circle_views(2)
-DEPTHS = [SCENE.depth(pose) for pose in POSES]
 HAND = "robotiq-2f85"
 #: The hand network's card: its operating threshold (the main weights have no card: VGN's 0.9).
 HAND_THRESHOLD = 0.7
-#: No check, so no fallback: the answer's threshold is the network's own.
-UNCHECKED = {"clearance": False, "grip": False}
 #: The hand is also among the main network's: its own network wins.
 ENV = {"VGN_API_KEY": "", "VGN_TORCH_THREADS": "1", "VGN_NETWORK_GRIPPERS": f'["franka", "{HAND}"]'}
 
@@ -60,18 +54,6 @@ def service(random_checkpoint: Path, hand_weights: Path) -> Iterator[EmbeddedSer
     env = ENV | {"VGN_HAND_MODELS": json.dumps({HAND: str(hand_weights)})}
     with EmbeddedService(model=random_checkpoint, env=env, grpc=True) as running:
         yield running
-
-
-def answers_by_frames(client: VGNClient | GRPCClient, gripper: str | None = None) -> list[tuple[str, float]]:
-    """(model, threshold) of the answers after the first frame and after the second."""
-    session_id = client.create_session(intrinsics=INTRINSICS, gripper=gripper).session_id
-    answers = []
-    for depth, pose in zip(DEPTHS, POSES, strict=True):
-        client.add_frame(session_id, depth, pose)
-        answer = client.grasps(session_id, **UNCHECKED)
-        answers.append((answer.model, answer.threshold))
-    client.delete_session(session_id)
-    return answers
 
 
 def test_a_hands_sessions_get_its_own_network_and_the_others_the_main_one(
