@@ -7,15 +7,18 @@ import hashlib
 import json
 from pathlib import Path
 
+import pytest
 from fastapi.testclient import TestClient
 
+from service.core import PlanningService
 from service.planner import GraspPlanner
-from service.settings import PACKAGED_MODEL, Settings
+from service.settings import PACKAGED_HAND_MODELS, PACKAGED_MODEL, Settings
 from service.vgn.checkpoint import card_path, weights_id
 from tests.helpers.apps import serve
 from tests.helpers.frames import frame_files, meta_json
 from tests.helpers.runs import check_results, clear_scene
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
+from vgn_contract.gripper_description import builtin_gripper
 
 
 def fused_session(http: TestClient, session_id: str, scene: BoxScene) -> str:
@@ -119,3 +122,40 @@ def test_clear_scene_out_of_the_box(tmp_path: Path, monkeypatch):
         and config["threshold"] == GraspPlanner.from_path(PACKAGED_MODEL, device="cpu").default_threshold
     )
     assert summary["successes"] >= 2, "the trained model removes objects from a simulated table"
+
+
+def packaged_hand_networks() -> list[Path]:
+    """The hand networks the package ships (``service/models/grippers/<hand>.safetensors``)."""
+    return sorted(PACKAGED_HAND_MODELS.glob("*.safetensors"))
+
+
+@pytest.mark.parametrize("weights", packaged_hand_networks(), ids=lambda path: path.stem)
+def test_a_packaged_hand_network_belongs_to_its_hand_and_its_data(weights: Path):
+    """Its card names its weights, the hand whose trials labelled its data (the description's
+    version) and the shards of that data, each in the repository unchanged, and says how to rebuild it."""
+    card = json.loads(card_path(weights).read_text())
+    assert card["model"]["weights_id"] == weights_id(weights)
+    assert card["gripper"] == builtin_gripper(weights.stem).version
+    assert 0.0 < card["threshold"] <= 1.0 and card["command"].startswith("vgn-train ")
+    steps = "\n".join(card["reproduce"])
+    for step in (f"generate-data --sim --gripper {weights.stem}", "vgn-data pack", "vgn-train", "--init"):
+        assert step in steps, f"the card's reproduce steps lack {step}"
+    repository = PACKAGED_MODEL.parents[2]
+    for data in card["packed_data"]:
+        folder = repository / data["folder"]
+        assert json.loads((folder / "manifest.json").read_text())["gripper"] == card["gripper"]
+        for shard in data["shards"]:
+            path = folder / shard["file"]
+            assert hashlib.sha256(path.read_bytes()).hexdigest() == shard["sha256"], f"{path} changed"
+    assert card["executed_grasps"]["rounds"] > 0, "the card says how the network grasped held-out objects"
+
+
+@pytest.mark.parametrize("weights", packaged_hand_networks(), ids=lambda path: path.stem)
+def test_the_service_serves_a_packaged_hand_network_by_default(weights: Path):
+    service = PlanningService.from_settings(Settings(api_key=None, grpc_port=0))
+    try:
+        served = service.served_by(weights.stem)
+        assert served is not None and served.model_id == weights_id(weights)
+        assert served.default_threshold == json.loads(card_path(weights).read_text())["threshold"]
+    finally:
+        service.close()
