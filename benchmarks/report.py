@@ -239,6 +239,8 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("surface-facing-", "Do antipodal pairs judged by the points that face each jaw (their mean normal, as on a cup's "
                         "curved wall) reach the objects that ended rounds with nothing offered, and does the "
                         "antipodal baseline gain from them too?"),
+    ("gripper-robotiq-", "How does the Robotiq 2F-85 hand clear the table with its own network, fine-tuned from the "
+                         "packaged one on its own trials, and with the packaged (franka) network?"),
     ("support-table-default-", "What does letting the fingertips meet the table in the last centimetre of the approach add "
                                "to the support plane? (Runs that newer results replace in the README's table.)"),
     ("table-contact-", "When the fingertips graze the table under a flat object, does a step back or a larger "
