@@ -40,11 +40,12 @@ OTHER_HAND = "robotiq-2f85"
 
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedService]:
-    """The packaged model behind HTTP and gRPC, as `vgn-client serve` runs it, told that it
-    serves a second built-in hand too (for the gripper parameter; franka stays the default)."""
+    """The packaged networks behind HTTP and gRPC, as `vgn-client serve` runs them: the main one and
+    the second built-in hand's own (for the gripper parameter; franka stays the default)."""
     log = tmp_path_factory.mktemp("ros") / "service.log"
-    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP", "VGN_GRIPPERS")
-    env = {"VGN_TORCH_THREADS": "1", "VGN_NETWORK_GRIPPERS": f'["franka", "{OTHER_HAND}"]'}
+    unset = ("VGN_MODEL", "VGN_API_KEY", "VGN_TURN_AVERAGE", "VGN_CLEARANCE", "VGN_GRIP", "VGN_GRIPPERS",
+             "VGN_NETWORK_GRIPPERS", "VGN_HAND_MODELS")  # fmt: skip
+    env = {"VGN_TORCH_THREADS": "1"}
     with EmbeddedService(env=env, unset=unset, log_path=log, grpc=True) as running:
         yield running
 

@@ -26,7 +26,9 @@ DEPTHS = [SCENE.depth(pose) for pose in POSES]
 ONE_VIEW_THRESHOLD = 0.65
 #: No check, so no fallback: the answer's threshold is the network's own.
 UNCHECKED = {"clearance": False, "grip": False}
-ENV = {"VGN_API_KEY": "", "VGN_TORCH_THREADS": "1", "VGN_NETWORK_GRIPPERS": '["franka", "robotiq-2f85"]'}
+#: robotiq-2f85 is served by the main network here (its packaged network off), as a hand of the main network's.
+ENV = {"VGN_API_KEY": "", "VGN_TORCH_THREADS": "1", "VGN_NETWORK_GRIPPERS": '["franka", "robotiq-2f85"]',
+       "VGN_HAND_MODELS": '{"robotiq-2f85": "none"}'}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
