@@ -1,6 +1,6 @@
 """How well each signal the service has tells a network's successful answers from its failed ones.
 
-    python -m benchmarks.answer_signal --data answers --source pile-answers --model A.safetensors \
+    python -m benchmarks.answer_signal --data data --source pile-answers --model A.safetensors \
         [--model B.safetensors ...] [--scenes 300] [--out DIR]
 
 Scenes labelled with ``generate-data --answer-grasps`` hold grasps one network answered, each tried

@@ -859,7 +859,7 @@ def training_data_page(manifest: dict[str, Any], results: Path) -> str:
         f"| all | {all_scenes:,} | {sum(t[1] for t in totals.values()):,} | | {all_bytes / 1e6:.1f} MB |"
     )
     parts = [f"`data/manifest.json`: hand `{manifest.get('gripper')}`, {len(manifest.get('shards', []))} shards, "
-             f"{all_bytes / max(all_scenes, 1) / 1e3:.1f} kB a scene.", "", *lines, *retired_rows(manifest)]  # fmt: skip
+             f"{all_bytes / max(all_scenes, 1) / 1e3:.1f} kB a scene.", "", *lines]  # fmt: skip
     migration = manifest.get("migration") or {}
     if migration:
         parts += ["", "Converted from the earlier grid shards (only scenes whose rebuilt observation equals the "
@@ -885,21 +885,6 @@ def training_data_page(manifest: dict[str, Any], results: Path) -> str:
                   f"(runs: {', '.join(f'{v:.0f}' for v in epoch['seconds']['recipes'])}) |",
                   f"| ratio, recipes / grids (target ≤ {epoch['target']}) | {epoch['ratio']:.2f} |"]  # fmt: skip
     return "\n".join(parts) + "\n"
-
-
-def retired_rows(manifest: dict[str, Any]) -> list[str]:
-    """The sources taken out of ``data/`` (``vgn-data retire``), whose record the manifest keeps."""
-    retired = manifest.get("retired") or {}
-    if not retired:
-        return []
-    lines = ["", "Retired (shards deleted; their hashes, counts and generator settings stay in the manifest):", "",
-             "| source | scenes | labels | retired | why |", "| --- | ---: | ---: | --- | --- |"]  # fmt: skip
-    for source, record in sorted(retired.items()):
-        scenes, grasps = (sum(entry[key] for entry in record["shards"]) for key in ("scenes", "grasps"))
-        lines.append(
-            f"| {source} | {scenes:,} | {grasps:,} | {record['retired'][:10]} | {record['reason']} |"
-        )
-    return lines
 
 
 def paired_comparison(results: Path) -> list[str]:

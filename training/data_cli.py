@@ -5,7 +5,6 @@
     vgn-data render data --per-scene 8 --out ~/vgn-cache  fresh observations for training, cached
     vgn-data migrate data --work ~/vgn-data/migration --objects pile=DIR,DIR --objects packed=DIR
     vgn-data pack RAW --source pile --out data            new raw scenes (with recipes) as shards
-    vgn-data retire data --source NAME --reason TEXT      take a source's shards out, keep its record
     vgn-data legacy-grids data --out DIR                  the grid shards a migration replaced, from git history
 
 VGN's object sets are found through --vgn-objects or $VGN_OBJECTS (the folder holding pile/,
@@ -75,13 +74,6 @@ def build_parser() -> argparse.ArgumentParser:
     pack.add_argument("--out", type=Path, default=Path("data"))
     pack.add_argument("--limit", type=int, help="pack at most this many new scenes")
 
-    retire = commands.add_parser(
-        "retire", help="delete a source's shards, keeping what they were and how to make them in the manifest"
-    )
-    retire.add_argument("data", type=Path)
-    retire.add_argument("--source", required=True, help="the source to take out of the folder")
-    retire.add_argument("--reason", required=True, help="why, recorded in the manifest and shown by show")
-
     render = commands.add_parser("render", help="render K observations per scene into a cache for vgn-train")
     render.add_argument("data", type=Path)
     render.add_argument("--out", type=Path, help="cache folder (default: ~/.cache/vgn-service/observations)")
@@ -130,19 +122,6 @@ def _pack(args: argparse.Namespace) -> int:
         print(f"{entry['file']}: {entry['scenes']} scenes, {entry['grasps']} grasps "
               f"({entry['positives']} positive), {entry['bytes'] / 1e6:.2f} MB")  # fmt: skip
     return _show(argparse.Namespace(data=args.out))
-
-
-def _retire(args: argparse.Namespace) -> int:
-    from training.recipe_shards import RecipeFolder
-
-    done = RecipeFolder(args.data).retire(args.source, args.reason)
-    if done.finishing:
-        print(f"finished retiring {args.source} from {args.data}: deleted {len(done.deleted)} leftover files")
-    else:
-        scenes, size = sum(e["scenes"] for e in done.shards), sum(e["bytes"] for e in done.shards)
-        print(f"retired {args.source} from {args.data}: {len(done.shards)} shards, {scenes} scenes, "
-              f"{size / 1e6:.1f} MB; their entries and the settings are in the manifest's retired record")  # fmt: skip
-    return _show(argparse.Namespace(data=args.data))
 
 
 def render_settings(args: argparse.Namespace) -> ObservationSettings:
@@ -211,9 +190,6 @@ def _show(args: argparse.Namespace) -> int:
         print(f"  {source}: {scenes} scenes, {grasps} labels, {size / 1e6:.1f} MB")
     print(f"  total: {sum(t[0] for t in by_source.values())} scenes, "
           f"{sum(t[2] for t in by_source.values()) / 1e6:.1f} MB")  # fmt: skip
-    for source, record in sorted(manifest.get("retired", {}).items()):
-        scenes = sum(entry["scenes"] for entry in record["shards"])
-        print(f"  retired {source}: {scenes} scenes, on {record['retired']}: {record['reason']}")
     return 0
 
 
@@ -274,7 +250,6 @@ def main(argv: list[str] | None = None) -> int:
             "migrate": _migrate,
             "verify": _verify,
             "pack": _pack,
-            "retire": _retire,
             "render": _render,
             "legacy-grids": _legacy_grids,
             "show": _show,

@@ -24,7 +24,7 @@ from training.distill import SoftTargets
 from training.grids import GridSource, cache_dir, cache_key, ensure_cached
 from training.labels import LabelSet
 from training.observations import ObservationSettings, open_cache, render_cache
-from training.recipe_shards import RecipeFolder, retired_text
+from training.recipe_shards import RecipeFolder
 from training.shards import ShardFolder, dequantize
 from vgn_data.dataset import RawDataset
 from vgn_data.files import remove_stale_temporaries
@@ -136,21 +136,20 @@ def load_scenes(
     A folder is a raw dataset, a folder of scene recipes (``manifest.json`` format 2: the
     observations ``observations`` asks for are rendered into ``cache_root`` first, where
     missing) or of grid shards (format 1; its grids were fused when packed). ``sources``: of a
-    recipe folder only these streams of scenes (``ValueError``, before anything is rendered, for a
-    name no recipe folder has, saying when and why where it was retired).
+    recipe folder only these streams of scenes (``ValueError`` for a name no recipe folder has).
     Raises ``FileNotFoundError`` for a folder that is none of them.
     """
-    if sources is not None:
-        _check_sources(data_dirs, sources)
     scenes: list[Scene] = []
     summaries: list[DatasetSummary] = []
+    found: set[str] = set()
     for index, data_dir in enumerate(data_dirs):
         if RecipeFolder(Path(data_dir)).exists():
             settings = observations or ObservationSettings()
-            rendered, summary = _load_recipes(index, Path(data_dir), resolution, max_depth, settings,
-                                              cache_root, workers, progress, sources)  # fmt: skip
+            rendered, summary, names = _load_recipes(index, Path(data_dir), resolution, max_depth, settings,
+                                                     cache_root, workers, progress, sources)  # fmt: skip
             scenes += rendered
             summaries.append(summary)
+            found |= names
             continue
         if ShardFolder(Path(data_dir)).exists():
             packed, summary = _load_packed(index, Path(data_dir), resolution, max_depth)
@@ -175,27 +174,11 @@ def load_scenes(
             source = GridSource(dataset, scene_id, grids_dir / f"{scene_id}.npz", resolution, max_depth, key)
             scenes.append(Scene(index, scene_id, source, labels, voxel_size))
         summaries.append(summary)
-    return scenes, summaries
-
-
-def _check_sources(data_dirs: list[Path], sources: tuple[str, ...]) -> None:
-    """Refuse sources that no recipe folder among ``data_dirs`` holds, from the manifests alone (a
-    typo fails before hours of rendering); a retired one is named with when and why."""
-    found: set[str] = set()
-    retired: dict[str, str] = {}  # name: when and why, with its folder
-    for data_dir in data_dirs:
-        folder = RecipeFolder(Path(data_dir))
-        if folder.exists():
-            manifest = folder.manifest()
-            found |= {entry["source"] for entry in manifest["shards"]}
-            for name, record in manifest.get("retired", {}).items():
-                retired[name] = f"{data_dir}: {retired_text(name, record)}"
-    missing = sorted(set(sources) - found)
-    if gone := [retired[name] for name in missing if name in retired]:
-        raise ValueError("no shards to draw from, " + "; ".join(gone))
+    missing = sorted(set(sources or ()) - found)
     if missing:
         raise ValueError(f"no recipe folder among {', '.join(map(str, data_dirs))} has the source(s) "
                          f"{', '.join(missing)}; it has: {', '.join(sorted(found)) or 'none'}")  # fmt: skip
+    return scenes, summaries
 
 
 def _check_grid(folder: Path, manifest: dict, resolution: int, max_depth: float) -> None:
@@ -248,13 +231,14 @@ def _load_recipes(
     workers: int,
     progress: bool,
     sources: tuple[str, ...] | None = None,
-) -> tuple[list[Scene], DatasetSummary]:
+) -> tuple[list[Scene], DatasetSummary, set[str]]:
     """Scenes of a recipe folder (of ``sources``, or all) with their rendered observations (rendered
-    now where missing)."""
+    now where missing), and the names of every source the folder has."""
     recipes = RecipeFolder(folder)
     manifest = recipes.manifest()
     _check_grid(folder, manifest, resolution, max_depth)
     shards = recipes.load(verify=True)
+    names = {shard.source for shard in shards}
     shards = [shard for shard in shards if sources is None or shard.source in sources]
     cache = Path(cache_root) if cache_root is not None else default_cache_dir() / "observations"
     bar = tqdm(total=sum(len(shard.scene_ids) for shard in shards), desc="observations", unit="scene",
@@ -274,7 +258,7 @@ def _load_recipes(
             labels = _admit(summary, rows, voxel_size, resolution)
             if labels is not None:
                 scenes.append(Scene(index, scene_id, RenderedObservations(grids, row), labels, voxel_size))
-    return scenes, summary
+    return scenes, summary, names
 
 
 def _group_rows(ids: list[str], rows: np.ndarray) -> list[tuple[str, np.ndarray]]:

@@ -12,7 +12,7 @@ from sim_worker.recipes import object_ref, object_roots
 from training.grids import MAX_DEPTH, RESOLUTION, fuse_grid
 from training.migrate import legacy_scenes, read_result
 from training.recipe_grids import grid_digest
-from training.recipe_shards import DEFAULT_SCENES_PER_SHARD, RecipeFolder, RecipeRecord, refuse_retired
+from training.recipe_shards import DEFAULT_SCENES_PER_SHARD, RecipeFolder, RecipeRecord
 from training.shards import ShardError, ShardFolder, quantize
 from vgn_data.dataset import RawDataset
 
@@ -54,13 +54,11 @@ def pack_raw(
     """Pack the scenes of ``raw`` that carry a recipe and are not in ``out`` yet as new shards of
     ``source``; the digest is taken of the grid fused from the raw depth the labels were made on.
     Objects recorded by absolute path under a known root are named by the root
-    (:func:`portable_objects`). A retired source name is refused before anything is read."""
-    folder = RecipeFolder(out)
-    if folder.exists():
-        refuse_retired(folder.manifest(), source, out)
+    (:func:`portable_objects`)."""
     generation = raw.generation()
     if "gripper" not in generation:
         raise ShardError(f"{raw.root} does not record the hand that labelled it (generation.json: gripper)")
+    folder = RecipeFolder(out)
     manifest = folder.start(generation["gripper"], raw.setup.to_json())
     done = folder.scene_ids(source)
     ids, rows = raw.grasps()

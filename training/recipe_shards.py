@@ -6,9 +6,7 @@ state, the grid's digest), its placed objects (file, scale, settled pose), its o
 cameras and its grasp labels; data/README.md lists every array with its shape and type.
 
 Shards are never rewritten: new scenes go into new shards, and the manifest (written
-atomically) lists each with its sha256. Data of another hand, grid or world is refused. A whole
-source can be retired (its shards deleted, their entries and its settings kept in the manifest's
-``retired`` record), and a retired name is never packed into again.
+atomically) lists each with its sha256. Data of another hand, grid or world is refused.
 """
 
 from __future__ import annotations
@@ -37,36 +35,6 @@ WORLD = {
     "workspace_pose": "identity (corner at the world origin)",
 }
 DEFAULT_SCENES_PER_SHARD = 2000
-
-
-def retired_record(manifest: dict[str, Any], source: str) -> dict[str, Any] | None:
-    """The manifest's record of ``source`` when it was retired, else None."""
-    return manifest.get("retired", {}).get(source)
-
-
-def retired_text(source: str, record: dict[str, Any]) -> str:
-    """When and why ``source`` was retired, for messages."""
-    return f"source {source!r} was retired on {record['retired']}: {record['reason']}"
-
-
-def refuse_retired(manifest: dict[str, Any], source: str, root: Path) -> None:
-    """Refuse new scenes for a retired source: the name's history (its shards' hashes, its
-    settings) stays in the manifest, and new data under it would be mistaken for that history."""
-    record = retired_record(manifest, source)
-    if record is not None:
-        raise ShardError(f"{root}: {retired_text(source, record)}; its shards and settings are recorded "
-                         "in the manifest's retired entry, so pack under another source name")  # fmt: skip
-
-
-@dataclass
-class RetiredSource:
-    """What a ``RecipeFolder.retire`` call did: the shard entries it took out of the manifest
-    (none when it only finished an interrupted run, ``finishing``) and the files it deleted."""
-
-    source: str
-    shards: list[dict[str, Any]]
-    deleted: list[str]
-    finishing: bool = False
 
 
 @dataclass
@@ -245,7 +213,6 @@ class RecipeFolder:
         """Write ``records`` as a new shard of ``source`` and the manifest listing it; returns its entry."""
         if not source.replace("-", "").replace("_", "").isalnum():
             raise ShardError(f"source name {source!r} must be alphanumeric (with - or _)")
-        refuse_retired(manifest, source, self.root)
         remove_stale_temporaries(self.root)
         taken = {entry["file"] for entry in manifest["shards"]}
         index = sum(1 for entry in manifest["shards"] if entry["source"] == source)
@@ -267,60 +234,3 @@ class RecipeFolder:
         manifest["updated"] = now()
         write_atomically(self.manifest_path, json.dumps(manifest, indent=2) + "\n")
         return entry
-
-    def retire(self, source: str, reason: str) -> RetiredSource:
-        """Take every shard of ``source`` out of the folder, keeping in the manifest's ``retired``
-        record what they were (their entries, the source's settings), why and when. The manifest
-        is written before any file is deleted, so an interruption leaves only files no manifest
-        lists; running again deletes them."""
-        manifest = self._manifest_to_retire_from(source)
-        if not reason.strip():
-            raise ValueError(f"{self.root}: give a reason for retiring source {source!r} (--reason)")
-        if (record := retired_record(manifest, source)) is not None:
-            return self._finish_retiring(manifest, source, record)
-        removed = [entry for entry in manifest["shards"] if entry["source"] == source]
-        if not removed and source not in manifest["sources"]:
-            present = sorted({e["source"] for e in manifest["shards"]} | set(manifest["sources"]))
-            raise ValueError(f"{self.root} has no source {source!r}; it has: {', '.join(present) or 'none'}")
-        manifest["shards"] = [entry for entry in manifest["shards"] if entry["source"] != source]
-        manifest.setdefault("retired", {})[source] = {
-            "shards": removed, "settings": manifest["sources"].pop(source, None), "reason": reason.strip(),
-            "retired": now(),
-        }  # fmt: skip
-        manifest["updated"] = now()
-        write_atomically(self.manifest_path, json.dumps(manifest, indent=2) + "\n")
-        return RetiredSource(source, removed, self._delete_unlisted(manifest, removed))
-
-    def _manifest_to_retire_from(self, source: str) -> dict[str, Any]:
-        """The manifest, or an error naming the folder and the source when there is none to retire from."""
-        if not self.manifest_path.is_file():
-            raise FileNotFoundError(f"cannot retire source {source!r}: {self.root} has no {MANIFEST} "
-                                    "(not a data folder)")  # fmt: skip
-        manifest = self.manifest()
-        if manifest.get("format") != RECIPE_FORMAT:
-            raise ShardError(f"cannot retire source {source!r}: {self.manifest_path} is format "
-                             f"{manifest.get('format')}, not recipes ({RECIPE_FORMAT})")  # fmt: skip
-        return manifest
-
-    def _finish_retiring(
-        self, manifest: dict[str, Any], source: str, record: dict[str, Any]
-    ) -> RetiredSource:
-        """Delete what an interrupted retire left of ``source``; refuse when nothing is left."""
-        left = [e for e in record["shards"] if (self.root / e["file"]).exists()]
-        deleted = self._delete_unlisted(manifest, left)
-        if not deleted:
-            raise ValueError(
-                f"{self.root}: {retired_text(source, record)}, and none of its files is left: nothing to do"
-            )
-        return RetiredSource(source, [], deleted, finishing=True)
-
-    def _delete_unlisted(self, manifest: dict[str, Any], entries: list[dict[str, Any]]) -> list[str]:
-        """Delete the files of ``entries`` that the manifest no longer lists; returns those deleted."""
-        listed = {entry["file"] for entry in manifest["shards"]}
-        deleted = []
-        for entry in entries:
-            path = self.root / entry["file"]
-            if entry["file"] not in listed and path.exists():
-                path.unlink()
-                deleted.append(entry["file"])
-        return deleted
