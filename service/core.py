@@ -325,6 +325,9 @@ class PlanningService:
             # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
             lower = ranked.model_copy(update={"threshold": floor})
             threshold = floor
+            # The surface's pairs first, under the clearance check alone: their own antipodal test on
+            # the fine cloud stands in for the grip check, whose coarse grid misses thin walls. Then
+            # the network's grasps below its threshold, where the surface offers none.
             pairs = None
             if self.settings.surface_fallback:
                 with self.sessions.use(session_id) as session:

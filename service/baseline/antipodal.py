@@ -137,8 +137,7 @@ def plan_antipodal(
     points, normals = cloud[:, :3], cloud[:, 3:]
     normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
     floor = points[:, 2].min() + TABLE_CLEARANCE
-    # A seed facing up steeper than the friction cone needs an opposite face looking down, which a
-    # camera above a table seldom sees: such seeds (the table top among them) are not drawn.
+    # Step 1's seeds: neither facing down nor up more steeply than the friction cone.
     candidates = np.flatnonzero((normals[:, 2] > -0.1) & (normals[:, 2] < math.cos(config.friction_angle)))
     if not len(candidates):
         return []
