@@ -6,14 +6,17 @@ this and map its ``ServiceError``s to their own codes; nothing here knows about 
 
 from __future__ import annotations
 
+import math
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import TypeVar
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from service.baseline import plan_antipodal
+from service.baseline import grips_antipodally, plan_antipodal
 from service.checks import Checked, check_grasps
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
@@ -285,6 +288,11 @@ class PlanningService:
             grip = grip_on and session.frame_count >= MIN_GRIP_FRAMES
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
+            # The fine cloud shows whether the pads meet opposed faces; one frame shows one face only.
+            opposing = (
+                self.settings.antipodal_check and not baseline and session.frame_count >= MIN_GRIP_FRAMES
+            )
+            cloud = session.volume.cloud() if opposing else None
             surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             workspace_size = session.workspace.size
@@ -316,6 +324,10 @@ class PlanningService:
                                 self.grip_config, self.settings.alternatives)  # fmt: skip
 
         checked = checked_of(grasps)
+        if cloud is not None and checked.grasps:
+            checked, model = self._opposed(
+                checked, model, cloud, session_hand, checked_of, ranked, workspace_pose
+            )
         floor = self.settings.fallback_threshold
         checks_ran = surface is not None or grid is not None
         fallback = (not baseline and checks_ran and not checked.grasps and query.threshold is None
@@ -330,8 +342,9 @@ class PlanningService:
             # the network's grasps below its threshold, where the surface offers none.
             pairs = None
             if self.settings.surface_fallback:
-                with self.sessions.use(session_id) as session:
-                    cloud = session.volume.cloud()
+                if cloud is None:
+                    with self.sessions.use(session_id) as session:
+                        cloud = session.volume.cloud()
                 pairs = checked_of(
                     plan_antipodal(cloud, workspace_pose, antipodal_config(lower), session_hand), None
                 )
@@ -355,6 +368,30 @@ class PlanningService:
             grip=grip_on,
             fallback=fallback,
         )
+
+    def _opposed(
+        self,
+        checked: Checked,
+        model: str,
+        cloud: np.ndarray,
+        hand: GripperDescription,
+        checked_of: Callable[[list[Grasp]], Checked],
+        query: GraspQuery,
+        workspace_pose: np.ndarray,
+    ) -> tuple[Checked, str]:
+        """The antipodal check on checked VGN grasps: those whose pads meet opposed faces of ``cloud``;
+        where none does, the surface's antipodal pairs that pass every check; where there are none
+        either, the grasps as they were. Returns the grasps and the model that answers."""
+        rotations = Rotation.from_quat([g.orientation for g in checked.grasps]).as_matrix()
+        positions = np.array([g.position for g in checked.grasps])
+        angle = math.radians(self.settings.antipodal_check_angle)
+        opposed = grips_antipodally(cloud, positions, rotations, hand, angle)
+        if opposed.any():
+            return replace(
+                checked, grasps=[g for g, keep in zip(checked.grasps, opposed, strict=True) if keep]
+            ), model
+        pairs = checked_of(plan_antipodal(cloud, workspace_pose, antipodal_config(query), hand))
+        return (pairs, "antipodal") if pairs.grasps else (checked, model)
 
     def network_for(self, frame_count: int, hand: GripperDescription) -> GraspPlanner:
         """The network for a volume fused from ``frame_count`` frames, planning for ``hand``: the

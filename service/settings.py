@@ -116,6 +116,22 @@ class Settings(BaseSettings):
         "to VGN_FALLBACK_THRESHOLD: the network's few confident locations on a shape it does not know can "
         "all fail a check while the surface still offers a grip",
     )
+    antipodal_check: bool = Field(
+        default=True,
+        description="on a volume fused from several frames, keep only the checked VGN grasps whose fingers close "
+        "on faces of the fine cloud opposed within VGN_ANTIPODAL_CHECK_ANGLE of the closing axis; where none "
+        "does, answer with the surface's antipodal pairs that pass every check (the answer's model says "
+        "'antipodal'), and where there are none of those either, with the checked grasps as they were: a "
+        "grasp whose pads meet slanted or one-sided faces slips far more often than one that meets "
+        "opposed faces (docs/benchmark.md)",
+    )
+    antipodal_check_angle: float = Field(
+        default=20.0,
+        gt=0.0,
+        lt=90.0,
+        description="degrees: how far the mean normal of the faces under each pad may turn from the closing "
+        "axis for VGN_ANTIPODAL_CHECK to count the faces as opposed",
+    )
     grip_preferred_alignment: float = Field(
         default=GripConfig().preferred_alignment,
         ge=-1.0,

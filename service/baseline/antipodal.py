@@ -255,6 +255,56 @@ def _grasps_at_seed(
     return results
 
 
+def grips_antipodally(
+    cloud: np.ndarray,
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    hand: GripperDescription | None = None,
+    friction_angle: float = AntipodalConfig.friction_angle,
+) -> np.ndarray:
+    """(G,) bool: which grasps (world positions (G, 3), rotation matrices (G, 3, 3)) close on faces of
+    ``cloud`` ((M, 6) world points + outward unit normals) that pass step 4's antipodal test within
+    ``friction_angle``, where their fingers are: another planner's grasp judged as this one judges its
+    own. The closing region is the pads' slab (|x| <= half the pad's width, 0 <= z <= the finger depth)
+    within the open hand; points within :data:`TABLE_CLEARANCE` of the lowest cloud point belong to the
+    support and do not count (fingertips may rest on it)."""
+    jaws = jaws_of(hand or default_gripper())
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    rotations = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
+    cloud = np.asarray(cloud, dtype=np.float64).reshape(-1, 6)
+    result = np.zeros(len(positions), dtype=bool)
+    if not len(positions) or not len(cloud):
+        return result
+    cloud = cloud[cloud[:, 2] >= cloud[:, 2].min() + TABLE_CLEARANCE]
+    points, normals = cloud[:, :3], cloud[:, 3:]
+    normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    cos_cone = math.cos(friction_angle)
+    half_open = jaws.max_opening / 2 + WIDTH_MARGIN
+    radius = math.sqrt(jaws.finger_half_width**2 + half_open**2 + (jaws.finger_depth / 2) ** 2)
+    middles = positions + rotations[:, :, 2] * (jaws.finger_depth / 2)
+    for g, near in enumerate(cKDTree(points).query_ball_point(middles, radius)):
+        local = (points[near] - positions[g]) @ rotations[g]  # world -> grasp frame
+        closing = (
+            (np.abs(local[:, 0]) <= jaws.finger_half_width)
+            & (np.abs(local[:, 1]) <= half_open)
+            & (local[:, 2] >= 0.0)
+            & (local[:, 2] <= jaws.finger_depth)
+        )
+        if closing.sum() < AntipodalConfig.min_points:
+            continue
+        qy = local[closing, 1]
+        nx, ny, nz = (normals[near][closing] @ rotations[g]).T  # in the grasp frame
+        hi = ((qy >= qy.max() - JAW_TOLERANCE) & (ny > 0.0))[None]
+        lo = ((qy <= qy.min() + JAW_TOLERANCE) & (ny < 0.0))[None]
+        result[g] = (
+            hi.any()
+            and lo.any()
+            and _mean_normal_cosine(hi, ny, nx, nz)[0] >= cos_cone
+            and _mean_normal_cosine(lo, -ny, nx, nz)[0] >= cos_cone
+        )
+    return result
+
+
 def _mean_normal_cosine(jaw: np.ndarray, ny: np.ndarray, nu: np.ndarray, nv: np.ndarray) -> np.ndarray:
     """Per depth, the cosine between the mean normal of the ``jaw`` points and +y (``ny``, ``nu``,
     ``nv``: the normals' components along y and two axes across it): a curved face's tilts about
