@@ -65,9 +65,9 @@ TABLE_CLEARANCE = 0.005
 @dataclass(frozen=True)
 class Jaws:
     """The hand as the baseline models it (m): opening, finger length along the approach, half the
-    finger width along x, the palm's half width along y and its height along z; ``near``/``reach``
-    are balls around a seed holding every point the fingers and the palm of a hand placed for that
-    seed can touch."""
+    finger width along x, the palm's half width along y and its height along z; ``near`` and ``reach``
+    are balls about a seed holding every point the fingers and the palm of a hand placed for that seed
+    can touch."""
 
     max_opening: float
     finger_depth: float
@@ -75,11 +75,15 @@ class Jaws:
     palm_half_y: float
     palm_depth: float
 
-    @property
-    def near(self) -> float:
-        """Radius (m) of the fingers' neighbourhood of a seed."""
-        return math.sqrt(
-            self.finger_half_width**2 + (self.max_opening + FINGER_THICKNESS + 0.003) ** 2 + 0.045**2
+    def near(self, depths: tuple[float, ...]) -> tuple[float, float]:
+        """The fingers' neighbourhood of a seed for fingertips ``depths`` past it: a ball this far (m)
+        from the seed towards -y, of this radius (m). It holds the cylinder along -y the fingers can
+        reach: from a finger's thickness beyond the seed to a finger's thickness beyond the maximum
+        opening, and as far around the closing axis as a finger reaches along z and across x."""
+        length = self.max_opening + 2 * (FINGER_THICKNESS + WIDTH_MARGIN)
+        along_z = max(max(depths), self.finger_depth - min(depths))
+        return length / 2 - FINGER_THICKNESS - WIDTH_MARGIN, math.hypot(
+            length / 2, self.finger_half_width, along_z
         )
 
     @property
@@ -184,7 +188,8 @@ def _grasps_at_seed(
     max_opening, finger_depth, finger_half_width = jaws.max_opening, jaws.finger_depth, jaws.finger_half_width
     origin, y = points[seed], normals[seed]
     cos_cone = math.cos(config.friction_angle)
-    near = np.asarray(tree.query_ball_point(origin, jaws.near), dtype=np.intp)
+    offset, radius = jaws.near(config.depths)
+    near = np.asarray(tree.query_ball_point(origin - offset * y, radius), dtype=np.intp)
     rel = points[near] - origin
     py, ny = rel @ y, normals[near] @ y  # n · y is the same for every approach
     opposite = (ny <= -cos_cone) & (py >= -max_opening) & (py <= 0.0)

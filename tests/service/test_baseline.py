@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from scipy.spatial.transform import Rotation
 
-from service.baseline import AntipodalConfig, plan_antipodal
+from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
 from service.core import PlanningService
 from service.http_app import create_app
 from service.settings import Settings
@@ -114,3 +115,25 @@ def test_antipodal_over_http_needs_no_model():
         body = response.json()
         assert body["model"] == "antipodal" and body["grasps"]
         assert http.get(f"/sessions/{session_id}/grasps", params={"planner": "magic"}).status_code == 422
+
+
+def test_another_planners_grasp_is_judged_by_the_faces_its_pads_meet(core):
+    """The antipodal test at a given pose: the planner's own best grasp meets the box's opposed sides;
+    turned 45 degrees about its approach it meets them at 45 degrees, outside a 20-degree cone and
+    inside a 50-degree one; lifted clear of the box its pads close on nothing."""
+    session_id = fused_session(core)
+    best = core.plan(session_id, GraspQuery(planner="antipodal", threshold=0.0)).grasps[0]
+    cloud = core.cloud(session_id)
+    matrix = best.as_matrix()
+    turned = matrix[:3, :3] @ Rotation.from_euler("z", 45.0, degrees=True).as_matrix()
+    lifted = np.asarray(best.position) - 0.2 * matrix[:3, 2]
+    cone = np.radians(20.0)
+    poses = [(best.position, matrix[:3, :3]), (best.position, turned), (lifted, matrix[:3, :3])]
+    positions, rotations = np.array([p for p, _ in poses]), np.array([r for _, r in poses])
+    assert grips_antipodally(cloud, positions, rotations, default_gripper(), cone).tolist() == [
+        True,
+        False,
+        False,
+    ]
+    wide = grips_antipodally(cloud, positions[1:2], rotations[1:2], default_gripper(), np.radians(50.0))
+    assert wide.tolist() == [True]

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from service.baseline import grips_antipodally
 from service.checks import SUPPORT_CONTACT_TOLERANCE, check_grasps, contact_tolerances
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
@@ -17,6 +18,7 @@ from service.grip import GripConfig, gripping_grasps, support_height
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
+from vgn_contract.gripper_description import default_gripper
 from vgn_contract.schemas import Grasp, GraspQuery, SessionCreate
 
 #: A vertical wall 3 cm thick through the middle of the grid, its faces turned 40 degrees about z
@@ -158,6 +160,46 @@ def test_before_the_lower_threshold_the_surfaces_antipodal_pairs_are_checked_and
         assert named.grasps == [] and named.model == service.planner.model_id  # a named threshold: neither
     finally:
         service.close()
+
+
+@pytest.mark.parametrize("angle", [20.0, 12.0, 0.5])
+def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answers_with_pairs(angle):
+    """On the box the network's checked grasps close across its sides; the check keeps those whose pads
+    meet faces opposed within ``angle`` of the closing axis: all within 20 degrees, some within 12 (the
+    fused box's sides are not perfectly flat). Within half a degree none do: the
+    surface's antipodal pairs that pass every check (the grip check too) answer instead."""
+    query = GraspQuery(threshold=0.5)
+    answers = {}
+    for check in (False, True):
+        settings = Settings(
+            model=PACKAGED_MODEL, api_key=None, antipodal_check=check, antipodal_check_angle=angle
+        )
+        service = PlanningService.from_settings(settings)
+        try:
+            session = fused_session(service)
+            answers[check] = service.plan(session, query)
+            cloud, grid = service.cloud(session), service.grid(session)
+            with service.sessions.use(session) as state:
+                surface = state.volume.surface_points()
+            grip_config = service.grip_config
+            network = service.planner.model_id
+        finally:
+            service.close()
+    unchecked, answer = answers[False], answers[True]
+    assert unchecked.grasps and unchecked.model == network
+    if angle == 0.5:
+        assert answer.model == "antipodal" and answer.grasps and answer.grip_dropped is not None
+        again = check_grasps(
+            answer.grasps, surface, grid, VOXEL, np.eye(4), SIZE, grip_config, alternatives=False
+        )
+        assert again.grasps == answer.grasps  # each passes both checks as it is offered
+        return
+    assert answer.model == network and answer.grasps
+    assert all(grasp in unchecked.grasps for grasp in answer.grasps)
+    assert (len(answer.grasps) < len(unchecked.grasps)) == (angle == 12.0)
+    rotations = Rotation.from_quat([g.orientation for g in answer.grasps]).as_matrix()
+    positions = np.array([g.position for g in answer.grasps])
+    assert grips_antipodally(cloud, positions, rotations, default_gripper(), np.radians(angle)).all()
 
 
 def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():
