@@ -4,8 +4,8 @@ A clutter-removal benchmark executes one grasp per look, so it says how a planne
 which of the grasps it did *not* choose would have held. This runs clutter-removal rounds and, at
 every look, executes each candidate grasp (quality at least ``--candidates``, turn-averaged, no
 check) from the same saved simulator state, then advances the round as the benchmark does (a
-random grasp of the default request). Each round's candidates, their outcomes and the fused grid
-go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes).
+random grasp of the default request). Each round's candidates, their outcomes, the fused grid and
+the fine cloud go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes).
 
     python -m benchmarks.grasp_outcomes collect --scene pile --objects OBJ/pile/train --rounds 33 --seed 11 --out DIR
     python -m benchmarks.grasp_outcomes report DIR
@@ -13,8 +13,10 @@ go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes).
 ``report`` replays the grip check (``service.grip``) on the stored grids at several alignment
 thresholds and prints, among the grasps a request without it would return (quality >= 0.8 and
 clearance-checked), how many it keeps and drops and how often each group succeeded; then, for
-several preferred alignments, how often a random grasp of each look's answer succeeds. Choose
-settings on *training* objects; benchmark on held-out ones.
+several preferred alignments, how often a random grasp of each look's answer succeeds; then, for
+several cones of the antipodal check (``--antipodal-angles``), the same for the grasps that pass both
+checks, judged by the faces their pads meet on the fine cloud. Choose settings on *training*
+objects; benchmark on held-out ones.
 """
 
 from __future__ import annotations
@@ -24,8 +26,10 @@ import io
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from client.connect import connect
+from service.baseline import grips_antipodally
 from service.checks import SUPPORT_CONTACT_TOLERANCE, contact_tolerances
 from service.clearance import approach_is_clear
 from service.grid_surface import grid_surface_points
@@ -63,7 +67,12 @@ def collect(args: argparse.Namespace) -> int:
                            rounds=args.rounds, seed=args.seed, threshold=DEFAULT_THRESHOLD, selection="random",
                            noise=args.noise, views=args.views, turn_average=True, clearance=True,
                            grip=False)  # fmt: skip
-    with EmbeddedService(log_path=out / "service.log") as service, connect(service.url) as vgn:
+    # Every candidate as the network and the clearance check give it: the antipodal check is judged in the report.
+    unfiltered = {"VGN_ANTIPODAL_CHECK": "false"}
+    with (
+        EmbeddedService(env=unfiltered, log_path=out / "service.log") as service,
+        connect(service.url) as vgn,
+    ):
         episode = ClutterRemoval(config, vgn, ResultsFolder(out / "benchmark", config.as_json()))
         try:
             for round_id in range(args.rounds):
@@ -98,7 +107,8 @@ def run_round(episode: ClutterRemoval, round_id: int, candidates: float) -> list
             world.restore_state(state)
         world.discard_state(state)
         rows = candidate_rows(every, {_key(g) for g in checked})
-        looks.append({"grasps": rows, "outcomes": np.array(outcomes, np.int8), "grid": vgn.tsdf(session)})
+        looks.append({"grasps": rows, "outcomes": np.array(outcomes, np.int8), "grid": vgn.tsdf(session),
+                      "cloud": vgn.cloud(session)})  # fmt: skip
         default = [g for g in checked if g.quality >= DEFAULT_THRESHOLD]
         if not default:
             break
@@ -121,8 +131,8 @@ def load_looks(folder: Path) -> list[dict[str, np.ndarray]]:
     looks = []
     for path in sorted(folder.glob("round*.npz")):
         with np.load(path) as data:
-            looks += [{name: data[f"{name}{i}"] for name in ("grasps", "outcomes", "grid")}
-                      for i in range(int(data["looks"]))]  # fmt: skip
+            looks += [{name: data[f"{name}{i}"] for name in ("grasps", "outcomes", "grid", "cloud")
+                       if f"{name}{i}" in data} for i in range(int(data["looks"]))]  # fmt: skip
     return looks
 
 
@@ -173,7 +183,51 @@ def report(args: argparse.Namespace) -> int:
         print(f"{preferred:19.2f} | {len(picks):5d} | {_percent(per_look):>18} | {grasps:15.1f}")
     print()
     support_report(looks, voxel_size)
+    print()
+    antipodal_report(looks, voxel_size, args.antipodal_angles)
     return 0
+
+
+def antipodal_report(looks: list[dict[str, np.ndarray]], voxel_size: float, angles: list[float]) -> None:
+    """Print, for each cone of the antipodal check, how the grasps of quality >= the operating threshold
+    that pass the clearance and grip checks fare when their pads meet opposed faces of the fine cloud and
+    when not; and how often a random grasp of each look succeeds when the check keeps the opposed ones
+    where there are some (the looks where none is opposed get the surface's pairs in the service)."""
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    judged = []
+    for look in looks:
+        if "cloud" not in look:
+            continue  # rounds collected before clouds were stored
+        grasps = look["grasps"]
+        chosen = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
+        grip = measure_grip(look["grid"], voxel_size, grasps[chosen, :3], grasps[chosen, 3:7], support="find")
+        passing = np.flatnonzero(chosen)[grip.passes()]
+        if len(passing):
+            rotations = Rotation.from_quat(grasps[passing, 3:7]).as_matrix()
+            judged.append(
+                (look["cloud"], grasps[passing, :3], rotations, look["outcomes"][passing] == success)
+            )
+    if not judged:
+        print("no look with a stored cloud and a grasp that passes both checks")
+        return
+    print(f"{len(judged)} looks with grasps of quality >= {DEFAULT_THRESHOLD} that pass both checks; judged by the "
+          "faces their pads meet on the fine cloud:")  # fmt: skip
+    print(
+        "cone (deg) | opposed | success % | not opposed | success % | success % per look | looks with none opposed"
+    )
+    everything = [held for *_, outcomes in judged for held in outcomes]
+    print(f"{'none':>10} | {len(everything):7d} | {_percent(everything):>9} | {0:11d} | {'-':>9} | "
+          f"{_percent([float(np.mean(outcomes)) for *_, outcomes in judged]):>18} | -")  # fmt: skip
+    for angle in angles:
+        opposed, other, per_look, without = [], [], [], 0
+        for cloud, positions, rotations, held in judged:
+            keep = grips_antipodally(cloud, positions, rotations, None, np.radians(angle))
+            opposed += list(held[keep])
+            other += list(held[~keep])
+            without += int(not keep.any())
+            per_look.append(float(np.mean(held[keep] if keep.any() else held)))
+        print(f"{angle:10.0f} | {len(opposed):7d} | {_percent(opposed):>9} | {len(other):11d} | {_percent(other):>9} | "
+              f"{_percent(per_look):>18} | {without}")  # fmt: skip
 
 
 def support_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
@@ -245,6 +299,8 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("--alignments", type=float, nargs="+", default=[0.4, 0.5, 0.6, 0.7])
     show.add_argument("--preferred", type=float, nargs="+", default=[0.5, 0.6, 0.7, 0.8],
                       help="preferred alignments to compare (0.5: no preference)")  # fmt: skip
+    show.add_argument("--antipodal-angles", type=float, nargs="+", default=[10.0, 15.0, 20.0, 25.0, 30.0],
+                      help="cones (degrees) of the antipodal check to compare")  # fmt: skip
     show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
     args = parser.parse_args(argv)
     return collect(args) if args.command == "collect" else report(args)

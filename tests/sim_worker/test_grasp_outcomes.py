@@ -23,6 +23,9 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     for look in looks:
         grasps, outcomes = look["grasps"], look["outcomes"]
         assert grasps.shape == (len(outcomes), 10) and look["grid"].shape == (40, 40, 40)
+        assert (
+            look["cloud"].ndim == 2 and look["cloud"].shape[1] == 6 and len(look["cloud"])
+        )  # points, normals
         assert np.all(grasps[:, 8] >= 0.5), "candidates are the grasps of quality >= 0.5"
         assert set(np.unique(grasps[:, 9])) <= {0.0, 1.0}
         assert np.all((outcomes >= 0) & (outcomes < len(Outcome)))
@@ -31,7 +34,8 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     capsys.readouterr()
     assert grasp_outcomes.main(argv) == 0, "a rerun resumes"
     assert "round 0" not in capsys.readouterr().out and stored.read_bytes() == written
-    report_argv = ["report", str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95"]
+    report_argv = ["report", str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95",
+                   "--antipodal-angles", "1", "30"]  # fmt: skip
     assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
     assert f"{len(looks)} looks" in report and "min alignment | kept" in report
@@ -47,3 +51,10 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     ]
     assert int(looks_all) == int(looks_square)
     assert float(grasps_square) <= float(grasps_all)
+    # Each cone of the antipodal check splits the grasps that pass both checks into opposed and not; a
+    # 1-degree cone finds fewer opposed than a 30-degree one.
+    assert "cone (deg)" in report, report
+    rows = [line.split("|") for line in report.split("cone (deg)")[1].splitlines()[1:] if line.strip()]
+    totals = {int(row[1]) + int(row[3]) for row in rows}
+    assert len(totals) == 1, "every cone splits the same grasps"
+    assert int(rows[1][1]) <= int(rows[2][1])
