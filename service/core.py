@@ -288,10 +288,9 @@ class PlanningService:
             grip = grip_on and session.frame_count >= MIN_GRIP_FRAMES
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
-            # The fine cloud shows whether the pads meet opposed faces; one frame shows one face only.
-            opposing = (
-                self.settings.antipodal_check and not baseline and session.frame_count >= MIN_GRIP_FRAMES
-            )
+            # The antipodal check refines the grip check where it runs: on the fine cloud, whether the
+            # pads meet opposed faces (one frame shows one face of each object: no grip check then).
+            opposing = self.settings.antipodal_check and not baseline and grip
             cloud = session.volume.cloud() if opposing else None
             surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose

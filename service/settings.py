@@ -118,12 +118,12 @@ class Settings(BaseSettings):
     )
     antipodal_check: bool = Field(
         default=True,
-        description="on a volume fused from several frames, keep only the checked VGN grasps whose fingers close "
+        description="where the grip check runs, keep only the checked VGN grasps whose fingers close "
         "on faces of the fine cloud opposed within VGN_ANTIPODAL_CHECK_ANGLE of the closing axis; where none "
         "does, answer with the surface's antipodal pairs that pass every check (the answer's model says "
         "'antipodal'), and where there are none of those either, with the checked grasps as they were: a "
-        "grasp whose pads meet slanted or one-sided faces slips far more often than one that meets "
-        "opposed faces (docs/benchmark.md)",
+        "grasp whose pads meet slanted or one-sided faces slips more often than one that meets opposed "
+        "faces (docs/concepts.md)",
     )
     antipodal_check_angle: float = Field(
         default=20.0,

@@ -167,7 +167,8 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
     """On the box the network's checked grasps close across its sides; the check keeps those whose pads
     meet faces opposed within ``angle`` of the closing axis: all within 20 degrees, some within 12 (the
     fused box's sides are not perfectly flat). Within half a degree none do: the
-    surface's antipodal pairs that pass every check (the grip check too) answer instead."""
+    surface's antipodal pairs that pass every check (the grip check too) answer instead. Without the
+    grip check it does not run."""
     query = GraspQuery(threshold=0.5)
     answers = {}
     for check in (False, True):
@@ -178,6 +179,7 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
         try:
             session = fused_session(service)
             answers[check] = service.plan(session, query)
+            answers[check, "no grip check"] = service.plan(session, query.model_copy(update={"grip": False}))
             cloud, grid = service.cloud(session), service.grid(session)
             with service.sessions.use(session) as state:
                 surface = state.volume.surface_points()
@@ -186,6 +188,8 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
         finally:
             service.close()
     unchecked, answer = answers[False], answers[True]
+    # It refines the grip check: without that, the check does not run either.
+    assert answers[True, "no grip check"].grasps == answers[False, "no grip check"].grasps
     assert unchecked.grasps and unchecked.model == network
     if angle == 0.5:
         assert answer.model == "antipodal" and answer.grasps and answer.grip_dropped is not None
