@@ -236,6 +236,11 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("surface-default-", "What does answering with the observed surface's antipodal pairs, when the network offers "
                          "nothing that passes the checks, add to the default request? (Runs that newer results "
                          "replace in the README's table.)"),
+    ("opposed-faces-", "What does the antipodal check (answering only the grasps whose pads meet opposed faces of the "
+                       "fine cloud, else the surface's pairs that pass every check) do to the default request? (Runs "
+                       "that newer results replace in the README's table.)"),
+    ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
+                       "do to the default request? (Runs that newer results replace in the README's table.)"),
     ("surface-facing-", "Do antipodal pairs judged by the points that face each jaw (their mean normal, as on a cup's "
                         "curved wall) reach the objects that ended rounds with nothing offered, and does the "
                         "antipodal baseline gain from them too?"),
