@@ -327,6 +327,8 @@ class PlanningService:
             checked, model = self._opposed(
                 checked, model, cloud, session_hand, checked_of, ranked, workspace_pose
             )
+            if model == "antipodal":  # the surface's pairs answer, at the baseline's threshold
+                threshold = antipodal_config(ranked).threshold
         floor = self.settings.fallback_threshold
         checks_ran = surface is not None or grid is not None
         fallback = (not baseline and checks_ran and not checked.grasps and query.threshold is None

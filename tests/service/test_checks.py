@@ -19,7 +19,7 @@ from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
 from vgn_contract.gripper_description import default_gripper
-from vgn_contract.schemas import Grasp, GraspQuery, SessionCreate
+from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, Grasp, GraspQuery, SessionCreate
 
 #: A vertical wall 3 cm thick through the middle of the grid, its faces turned 40 degrees about z
 #: from facing ±y: fingers closing along y meet it at 40 degrees, too slanted for :data:`STRICT`.
@@ -180,6 +180,7 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
             session = fused_session(service)
             answers[check] = service.plan(session, query)
             answers[check, "no grip check"] = service.plan(session, query.model_copy(update={"grip": False}))
+            answers[check, "default"] = service.plan(session, GraspQuery())
             cloud, grid = service.cloud(session), service.grid(session)
             with service.sessions.use(session) as state:
                 surface = state.volume.surface_points()
@@ -193,6 +194,14 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
     assert unchecked.grasps and unchecked.model == network
     if angle == 0.5:
         assert answer.model == "antipodal" and answer.grasps and answer.grip_dropped is not None
+        default = answers[True, "default"]  # the pairs answer at the baseline's threshold, not VGN's
+        assert default.model == "antipodal" and default.threshold == ANTIPODAL_DEFAULT_THRESHOLD
+        assert (
+            answers[False, "default"].threshold
+            == service.planner.default_threshold
+            != ANTIPODAL_DEFAULT_THRESHOLD
+        )
+        assert default.fallback is False
         again = check_grasps(
             answer.grasps, surface, grid, VOXEL, np.eye(4), SIZE, grip_config, alternatives=False
         )
