@@ -160,9 +160,12 @@ def test_the_verdict_does_not_depend_on_the_workspace_frame():
 
 @pytest.fixture(scope="module")
 def trained() -> Iterator[PlanningService]:
-    """The packaged model with the checks alone: a dropped grasp is not tried again in other poses
-    (tests/service/test_checks.py covers those)."""
-    settings = Settings(model=PACKAGED_MODEL, api_key=None, max_sessions=8, alternatives=False)
+    """The packaged model with the checks alone: a dropped grasp is not tried again in other poses, and
+    the antipodal check does not narrow what the grip check passed (tests/service/test_checks.py covers
+    both)."""
+    settings = Settings(
+        model=PACKAGED_MODEL, api_key=None, max_sessions=8, alternatives=False, antipodal_check=False
+    )
     service = PlanningService.from_settings(settings)
     yield service
     service.close()
@@ -214,7 +217,11 @@ def test_the_operator_sets_the_square_grip(trained):
     for preferred, expected in ((0.5, passing), (between, squarer)):
         core = PlanningService.from_settings(
             Settings(
-                model=PACKAGED_MODEL, api_key=None, grip_preferred_alignment=preferred, alternatives=False
+                model=PACKAGED_MODEL,
+                api_key=None,
+                grip_preferred_alignment=preferred,
+                alternatives=False,
+                antipodal_check=False,
             )
         )
         try:
