@@ -15,11 +15,13 @@ from fastapi.testclient import TestClient
 
 from client import BadRequest
 from client.grpc_client import GRPCClient
+from client.http import VGNClient
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grpc.server import build_server
 from service.hands import Hands
 from service.http_app import create_app
+from service.launch.embedded import EmbeddedService
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, BoxScene, circle_views
 from vgn_contract.gripper_description import BUILTIN_DIR, GripperDescription, parse_gripper
@@ -230,3 +232,31 @@ def test_the_operator_s_files_are_checked_when_the_service_starts(tmp_path):
     with pytest.raises(ValueError, match="VGN_NETWORK_GRIPPERS names unknown hands \\['schunk'\\]"):
         Hands.build([], ["franka", "schunk"])
     assert Hands.build().served == {"franka"}
+
+
+def test_a_real_server_plans_for_a_hand_described_in_the_operators_file(tmp_path):
+    """Over a socket, as a robot meets it: uvicorn started with the operator's description of a third
+    hand, sessions that name it and the franka hand on the same box, and the same network grasps
+    checked against each hand's own geometry (the narrow jaw's 6 cm opening hits the box's 6 cm sides)."""
+    path = tmp_path / "narrow-jaw.json"
+    path.write_text(json.dumps(variant("narrow-jaw", narrow)))
+    env = {
+        "VGN_API_KEY": "",
+        "VGN_TORCH_THREADS": "1",
+        "VGN_GRIPPERS": json.dumps([str(path)]),
+        "VGN_NETWORK_GRIPPERS": json.dumps(["franka", "narrow-jaw"]),
+    }
+    plain, checked = {}, {}
+    with EmbeddedService(env=env) as service, VGNClient(service.url) as client:
+        assert "narrow-jaw" in [info.name for info in client.grippers().grippers]
+        for name in ("franka", "narrow-jaw"):
+            session = client.create_session(intrinsics=INTRINSICS, gripper=name)
+            assert session.gripper == name
+            for pose in circle_views():
+                client.add_frame(session.session_id, BoxScene().depth(pose), pose)
+            plain[name] = client.grasps(session.session_id, threshold=0.0, clearance=False, grip=False)
+            checked[name] = client.grasps(session.session_id, threshold=0.0, grip=False)
+    assert plain["narrow-jaw"].grasps and plain["narrow-jaw"].grasps == plain["franka"].grasps
+    dropped = {name: answer.clearance_dropped + answer.workspace_dropped for name, answer in checked.items()}
+    assert dropped["narrow-jaw"] > dropped["franka"]
+    assert len(checked["narrow-jaw"].grasps) < len(checked["franka"].grasps)
