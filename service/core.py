@@ -288,10 +288,11 @@ class PlanningService:
             grip = grip_on and session.frame_count >= MIN_GRIP_FRAMES
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
-            # The antipodal check refines the grip check where it runs: on the fine cloud, whether the
-            # pads meet opposed faces (one frame shows one face of each object: no grip check then).
+            # The antipodal check refines the grip check where it runs: whether the pads meet opposed
+            # faces (one frame shows one face of each object: no grip check then), on the grid's faces
+            # first; the fine cloud is read only where those do not settle it.
             opposing = self.settings.antipodal_check and not baseline and grip
-            cloud = session.volume.cloud() if opposing else None
+            faces = session.volume.surface_cloud() if opposing else None
             surface = session.volume.surface_points() if clearance else None
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             workspace_size = session.workspace.size
@@ -322,10 +323,19 @@ class PlanningService:
             return check_grasps(candidates, surface, grip_grid, voxel_size, workspace_pose, workspace_size,
                                 self.grip_config, self.settings.alternatives)  # fmt: skip
 
+        cloud: np.ndarray | None = None
+
+        def fine_cloud() -> np.ndarray:
+            nonlocal cloud
+            if cloud is None:
+                with self.sessions.use(session_id) as session:
+                    cloud = session.volume.cloud()
+            return cloud
+
         checked = checked_of(grasps)
-        if cloud is not None and checked.grasps:
+        if faces is not None and checked.grasps:
             checked, model = self._opposed(
-                checked, model, cloud, session_hand, checked_of, ranked, workspace_pose
+                checked, model, faces, fine_cloud, session_hand, checked_of, ranked, workspace_pose
             )
             if model == "antipodal":  # the surface's pairs answer, at the baseline's threshold
                 threshold = antipodal_config(ranked).threshold
@@ -343,11 +353,8 @@ class PlanningService:
             # the network's grasps below its threshold, where the surface offers none.
             pairs = None
             if self.settings.surface_fallback:
-                if cloud is None:
-                    with self.sessions.use(session_id) as session:
-                        cloud = session.volume.cloud()
                 pairs = checked_of(
-                    plan_antipodal(cloud, workspace_pose, antipodal_config(lower), session_hand), None
+                    plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(lower), session_hand), None
                 )
             if pairs is not None and pairs.grasps:
                 checked, model = pairs, "antipodal"
@@ -374,24 +381,28 @@ class PlanningService:
         self,
         checked: Checked,
         model: str,
-        cloud: np.ndarray,
+        faces: np.ndarray,
+        fine_cloud: Callable[[], np.ndarray],
         hand: GripperDescription,
         checked_of: Callable[[list[Grasp]], Checked],
         query: GraspQuery,
         workspace_pose: np.ndarray,
     ) -> tuple[Checked, str]:
-        """The antipodal check on checked VGN grasps: those whose pads meet opposed faces of ``cloud``;
-        where none does, the surface's antipodal pairs that pass every check; where there are none
-        either, the grasps as they were. Returns the grasps and the model that answers."""
+        """The antipodal check on checked VGN grasps: those whose pads meet opposed faces of the grid's
+        surface (``faces``); where none does, those whose pads meet opposed faces of the fine cloud;
+        where none does there either, the surface's antipodal pairs that pass every check; where there
+        are none of those, the grasps as they were. Returns the grasps and the model that answers."""
         rotations = Rotation.from_quat([g.orientation for g in checked.grasps]).as_matrix()
         positions = np.array([g.position for g in checked.grasps])
-        angle = math.radians(self.settings.antipodal_check_angle)
-        opposed = grips_antipodally(cloud, positions, rotations, hand, angle)
-        if opposed.any():
-            return replace(
-                checked, grasps=[g for g, keep in zip(checked.grasps, opposed, strict=True) if keep]
-            ), model
-        pairs = checked_of(plan_antipodal(cloud, workspace_pose, antipodal_config(query), hand))
+        for cloud, angle in (
+            (lambda: faces, self.settings.antipodal_check_grid_angle),
+            (fine_cloud, self.settings.antipodal_check_angle),
+        ):
+            opposed = grips_antipodally(cloud(), positions, rotations, hand, math.radians(angle))
+            if opposed.any():
+                kept = [g for g, keep in zip(checked.grasps, opposed, strict=True) if keep]
+                return replace(checked, grasps=kept), model
+        pairs = checked_of(plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(query), hand))
         return (pairs, "antipodal") if pairs.grasps else (checked, model)
 
     def network_for(self, frame_count: int, hand: GripperDescription) -> GraspPlanner:

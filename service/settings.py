@@ -119,18 +119,26 @@ class Settings(BaseSettings):
     antipodal_check: bool = Field(
         default=True,
         description="where the grip check runs, keep only the checked VGN grasps whose fingers close "
-        "on faces of the fine cloud opposed within VGN_ANTIPODAL_CHECK_ANGLE of the closing axis; where none "
-        "does, answer with the surface's antipodal pairs that pass every check (the answer's model says "
-        "'antipodal'), and where there are none of those either, with the checked grasps as they were: a "
-        "grasp whose pads meet slanted or one-sided faces slips more often than one that meets opposed "
-        "faces (docs/concepts.md)",
+        "on opposed faces: first on the network's grid (its surface, normals from the TSDF gradient, within "
+        "VGN_ANTIPODAL_CHECK_GRID_ANGLE of the closing axis); where none does, on the fine cloud (within "
+        "VGN_ANTIPODAL_CHECK_ANGLE); where none does there either, answer with the surface's antipodal pairs "
+        "that pass every check (the answer's model says 'antipodal'), and where there are none of those, "
+        "with the checked grasps as they were: a grasp whose pads meet slanted or one-sided faces slips "
+        "more often than one that meets opposed faces (docs/concepts.md)",
+    )
+    antipodal_check_grid_angle: float = Field(
+        default=35.0,
+        gt=0.0,
+        lt=90.0,
+        description="degrees: how far the mean normal of the grid's faces under each pad may turn from the "
+        "closing axis for VGN_ANTIPODAL_CHECK to count them as opposed without reading the fine cloud",
     )
     antipodal_check_angle: float = Field(
         default=20.0,
         gt=0.0,
         lt=90.0,
-        description="degrees: how far the mean normal of the faces under each pad may turn from the closing "
-        "axis for VGN_ANTIPODAL_CHECK to count the faces as opposed",
+        description="degrees: how far the mean normal of the fine cloud's faces under each pad may turn from "
+        "the closing axis for VGN_ANTIPODAL_CHECK to count them as opposed",
     )
     grip_preferred_alignment: float = Field(
         default=GripConfig().preferred_alignment,

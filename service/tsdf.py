@@ -268,6 +268,11 @@ class SceneVolume:
         points = self.coarse.surface_points()
         return points @ self.workspace_pose[:3, :3].T + self.workspace_pose[:3, 3]
 
+    def surface_cloud(self) -> np.ndarray:
+        """(M, 6) float32 points and unit normals (from the TSDF gradient) of the coarse volume's
+        surface, *world* frame: the network's view of the faces, cheap enough for every request."""
+        return self._in_world(*self.coarse.surface_cloud())
+
     def cloud(self) -> np.ndarray:
         """(M, 6) float32 points and unit normals of the fused surface in the *world* frame."""
         self._cloud_read = True
@@ -277,10 +282,11 @@ class SceneVolume:
             if self._fine is None:
                 return np.zeros((0, 6), dtype=np.float32)
             points, normals = self._fine.surface_cloud()
+        return self._in_world(points, normals)
+
+    def _in_world(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
         rotation, translation = self.workspace_pose[:3, :3], self.workspace_pose[:3, 3]
-        world_points = points @ rotation.T + translation
-        world_normals = normals @ rotation.T
-        return np.hstack([world_points, world_normals]).astype(np.float32)
+        return np.hstack([points @ rotation.T + translation, normals @ rotation.T]).astype(np.float32)
 
     def state(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The coarse volume's ``TSDFVolume.state()`` and the fine one's (None before any frame
