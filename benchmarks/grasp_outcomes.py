@@ -32,9 +32,10 @@ from client.connect import connect
 from service.baseline import grips_antipodally
 from service.checks import SUPPORT_CONTACT_TOLERANCE, contact_tolerances
 from service.clearance import approach_is_clear
-from service.grid_surface import grid_surface_points
+from service.grid_surface import grid_surface_cloud, grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
 from service.launch.embedded import EmbeddedService
+from service.settings import Settings
 from sim_worker.clutter import MAX_CONSECUTIVE_FAILURES, ClutterConfig, ClutterRemoval
 from sim_worker.grasping import Outcome, execute_grasp
 from sim_worker.results import ResultsFolder
@@ -184,50 +185,81 @@ def report(args: argparse.Namespace) -> int:
     print()
     support_report(looks, voxel_size)
     print()
-    antipodal_report(looks, voxel_size, args.antipodal_angles)
+    antipodal_report(looks, voxel_size, args.grid_angles, args.antipodal_angles)
     return 0
 
 
-def antipodal_report(looks: list[dict[str, np.ndarray]], voxel_size: float, angles: list[float]) -> None:
+def antipodal_report(
+    looks: list[dict[str, np.ndarray]], voxel_size: float, grid_angles: list[float], angles: list[float]
+) -> None:
     """Print, for each cone of the antipodal check, how the grasps of quality >= the operating threshold
-    that pass the clearance and grip checks fare when their pads meet opposed faces of the fine cloud and
-    when not; and how often a random grasp of each look succeeds when the check keeps the opposed ones
-    where there are some (the looks where none is opposed get the surface's pairs in the service)."""
+    that pass the clearance and grip checks fare when their pads meet opposed faces and when not, first
+    on the grid's surface (``grid_angles``), then on the fine cloud (``angles``); and how often a random
+    grasp of each look succeeds when the check keeps the opposed ones where there are some (the looks
+    where none is opposed get the surface's pairs in the service). The last table is the service's
+    check: the grid's faces within each cone first, the fine cloud's within the default cone where
+    those keep none."""
     success = OUTCOMES.index(Outcome.SUCCESS)
     judged = []
     for look in looks:
-        if "cloud" not in look:
-            continue  # rounds collected before clouds were stored
         grasps = look["grasps"]
         chosen = (grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)
         grip = measure_grip(look["grid"], voxel_size, grasps[chosen, :3], grasps[chosen, 3:7], support="find")
         passing = np.flatnonzero(chosen)[grip.passes()]
         if len(passing):
             rotations = Rotation.from_quat(grasps[passing, 3:7]).as_matrix()
-            judged.append(
-                (look["cloud"], grasps[passing, :3], rotations, look["outcomes"][passing] == success)
-            )
+            # The simulator's workspace corner is the world's origin: grid points are world points.
+            faces = {"grid": grid_surface_cloud(look["grid"], voxel_size), "cloud": look.get("cloud")}
+            judged.append((faces, grasps[passing, :3], rotations, look["outcomes"][passing] == success))
     if not judged:
-        print("no look with a stored cloud and a grasp that passes both checks")
+        print("no look with a grasp that passes both checks")
         return
-    print(f"{len(judged)} looks with grasps of quality >= {DEFAULT_THRESHOLD} that pass both checks; judged by the "
-          "faces their pads meet on the fine cloud:")  # fmt: skip
-    print(
-        "cone (deg) | opposed | success % | not opposed | success % | success % per look | looks with none opposed"
-    )
     everything = [held for *_, outcomes in judged for held in outcomes]
-    print(f"{'none':>10} | {len(everything):7d} | {_percent(everything):>9} | {0:11d} | {'-':>9} | "
-          f"{_percent([float(np.mean(outcomes)) for *_, outcomes in judged]):>18} | -")  # fmt: skip
-    for angle in angles:
-        opposed, other, per_look, without = [], [], [], 0
-        for cloud, positions, rotations, held in judged:
-            keep = grips_antipodally(cloud, positions, rotations, None, np.radians(angle))
-            opposed += list(held[keep])
-            other += list(held[~keep])
-            without += int(not keep.any())
-            per_look.append(float(np.mean(held[keep] if keep.any() else held)))
-        print(f"{angle:10.0f} | {len(opposed):7d} | {_percent(opposed):>9} | {len(other):11d} | {_percent(other):>9} | "
-              f"{_percent(per_look):>18} | {without}")  # fmt: skip
+    print(f"{len(judged)} looks with grasps of quality >= {DEFAULT_THRESHOLD} that pass both checks, "
+          f"{len(everything)} grasps, {_percent(everything)} % successful, "
+          f"{_percent([float(np.mean(outcomes)) for *_, outcomes in judged])} % per look")  # fmt: skip
+    header = "cone (deg) | opposed | success % | not opposed | success % | success % per look | looks with none opposed"
+    verdicts: dict[tuple[str, float], list[np.ndarray]] = {}
+    for surface, cones in (("grid", grid_angles), ("cloud", angles)):
+        if any(faces[surface] is None for faces, *_ in judged):
+            print("\nno fine cloud stored (rounds collected before clouds were): the grid's faces only")
+            break
+        print(
+            f"\njudged by the faces their pads meet on the {'grid' if surface == 'grid' else 'fine cloud'}:"
+        )
+        print(header)
+        for angle in cones:
+            keeps = [
+                grips_antipodally(faces[surface], positions, rotations, None, np.radians(angle))
+                for faces, positions, rotations, _ in judged
+            ]
+            verdicts[surface, angle] = keeps
+            _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
+    fine_angle = float(Settings.model_fields["antipodal_check_angle"].default)
+    if ("cloud", fine_angle) not in verdicts:
+        return
+    print(
+        f"\nthe grid's faces first, the fine cloud's within {fine_angle:.0f} degrees where those keep none:"
+    )
+    print(header)
+    for angle in grid_angles:
+        keeps = [
+            grid if grid.any() else cloud
+            for grid, cloud in zip(verdicts["grid", angle], verdicts["cloud", fine_angle], strict=True)
+        ]
+        _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
+
+
+def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -> None:
+    """One row of a cone table: the opposed and other grasps' success, and per look."""
+    opposed = [h for keep, held in zip(keeps, outcomes, strict=True) for h in held[keep]]
+    other = [h for keep, held in zip(keeps, outcomes, strict=True) for h in held[~keep]]
+    per_look = [
+        float(np.mean(held[keep] if keep.any() else held)) for keep, held in zip(keeps, outcomes, strict=True)
+    ]
+    without = sum(not keep.any() for keep in keeps)
+    print(f"{label} | {len(opposed):7d} | {_percent(opposed):>9} | {len(other):11d} | {_percent(other):>9} | "
+          f"{_percent(per_look):>18} | {without}")  # fmt: skip
 
 
 def support_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
@@ -299,8 +331,10 @@ def main(argv: list[str] | None = None) -> int:
     show.add_argument("--alignments", type=float, nargs="+", default=[0.4, 0.5, 0.6, 0.7])
     show.add_argument("--preferred", type=float, nargs="+", default=[0.5, 0.6, 0.7, 0.8],
                       help="preferred alignments to compare (0.5: no preference)")  # fmt: skip
+    show.add_argument("--grid-angles", type=float, nargs="+", default=[25.0, 30.0, 35.0, 40.0, 45.0],
+                      help="cones (degrees) of the antipodal check on the grid's faces to compare")  # fmt: skip
     show.add_argument("--antipodal-angles", type=float, nargs="+", default=[10.0, 15.0, 20.0, 25.0, 30.0],
-                      help="cones (degrees) of the antipodal check to compare")  # fmt: skip
+                      help="cones (degrees) of the antipodal check on the fine cloud to compare")  # fmt: skip
     show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
     args = parser.parse_args(argv)
     return collect(args) if args.command == "collect" else report(args)

@@ -8,12 +8,14 @@ values differ in sign, the point where the linear interpolation of the two is ze
 the rule Open3D's ``UniformTSDFVolume.extract_point_cloud`` applies (voxel values at voxel
 centres, ``(index + 0.5) * voxel_size``; the grid's outermost layer of voxels is skipped), so a
 teacher's checks during training see the geometry the service's checks see (a test compares
-the two).
+the two). Their normals follow from the grid's gradient, as Open3D's do from its volume's
+(``grid_surface_cloud``), so the antipodal check on the grid's faces can be replayed offline.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import map_coordinates
 
 
 def grid_surface_points(grid: np.ndarray, voxel_size: float) -> np.ndarray:
@@ -36,3 +38,16 @@ def grid_surface_points(grid: np.ndarray, voxel_size: float) -> np.ndarray:
         index[:, axis] += near / (near + far)  # the zero of the line between the two values
         points.append((index + 0.5) * voxel_size)
     return np.concatenate(points)
+
+
+def grid_surface_cloud(grid: np.ndarray, voxel_size: float) -> np.ndarray:
+    """(M, 6) float64 ``grid_surface_points`` and their unit normals, out of the surface towards free
+    space: the TSDF's gradient (central differences), interpolated at each point. Open3D's
+    ``extract_point_cloud`` normals agree except about the edges of what was observed, where the
+    grid's unobserved voxels (0) read as deep inside a surface."""
+    points = grid_surface_points(grid, voxel_size)
+    gradient = np.gradient(2.0 * np.asarray(grid, dtype=np.float64) - 1.0)
+    indices = (points / voxel_size - 0.5).T  # voxel values sit at voxel centres
+    normals = np.stack([map_coordinates(axis, indices, order=1) for axis in gradient], axis=1)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    return np.hstack([points, normals])

@@ -312,6 +312,11 @@ class SceneVolume:
             self.coarse, self._fine = volume, restored_fine
 
     # For the worker (service.cloud_fusion.FusionQueue) -----------------------------------------
+    @property
+    def cloud_read(self) -> bool:
+        """Whether anything has read the fine cloud: from then on the worker keeps it fused in lulls."""
+        return self._cloud_read
+
     def fusion_wanted(self) -> tuple[bool, bool]:
         """For the worker: (worth fusing in a lull: the cloud was read or the queue got a quarter full,
         wanted now: an upload waits for room)."""

@@ -162,33 +162,48 @@ def test_before_the_lower_threshold_the_surfaces_antipodal_pairs_are_checked_and
         service.close()
 
 
-@pytest.mark.parametrize("angle", [20.0, 12.0, 0.5])
-def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answers_with_pairs(angle):
-    """On the box the network's checked grasps close across its sides; the check keeps those whose pads
-    meet faces opposed within ``angle`` of the closing axis: all within 20 degrees, some within 12 (the
-    fused box's sides are not perfectly flat). Within half a degree none do: the
-    surface's antipodal pairs that pass every check (the grip check too) answer instead. Without the
+@pytest.mark.parametrize(
+    ("grid_angle", "angle"), [(35.0, 20.0), (0.5, 20.0), (0.5, 12.0), (0.5, 0.5)], ids=str
+)
+def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answers_with_pairs(
+    grid_angle, angle
+):
+    """On the box the network's checked grasps close across its sides. The check keeps those whose pads
+    meet faces of the grid's surface opposed within ``grid_angle`` of the closing axis: all within 35
+    degrees. Where none does (within half a degree), it judges the fine cloud's faces within ``angle``:
+    all within 20 degrees, some within 12 (the fused box's sides are not perfectly flat). Within half a
+    degree none does there either: the surface's antipodal pairs that pass every check (the grip check
+    too) answer instead. The fine cloud is read only where the grid's faces keep no grasp. Without the
     grip check it does not run."""
     query = GraspQuery(threshold=0.5)
     answers = {}
     for check in (False, True):
         settings = Settings(
-            model=PACKAGED_MODEL, api_key=None, antipodal_check=check, antipodal_check_angle=angle
+            model=PACKAGED_MODEL,
+            api_key=None,
+            antipodal_check=check,
+            antipodal_check_grid_angle=grid_angle,
+            antipodal_check_angle=angle,
         )
         service = PlanningService.from_settings(settings)
         try:
             session = fused_session(service)
             answers[check] = service.plan(session, query)
+            with service.sessions.use(session) as state:
+                answers[check, "read the fine cloud"] = state.volume.cloud_read
             answers[check, "no grip check"] = service.plan(session, query.model_copy(update={"grip": False}))
             answers[check, "default"] = service.plan(session, GraspQuery())
             cloud, grid = service.cloud(session), service.grid(session)
             with service.sessions.use(session) as state:
-                surface = state.volume.surface_points()
+                surface, faces = state.volume.surface_points(), state.volume.surface_cloud()
             grip_config = service.grip_config
             network = service.planner.model_id
         finally:
             service.close()
     unchecked, answer = answers[False], answers[True]
+    # The fine cloud is read only where the grid's faces keep no grasp.
+    assert answers[True, "read the fine cloud"] == (grid_angle != 35.0)
+    assert not answers[False, "read the fine cloud"]
     # It refines the grip check: without that, the check does not run either.
     assert answers[True, "no grip check"].grasps == answers[False, "no grip check"].grasps
     assert unchecked.grasps and unchecked.model == network
@@ -212,6 +227,9 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
     assert (len(answer.grasps) < len(unchecked.grasps)) == (angle == 12.0)
     rotations = Rotation.from_quat([g.orientation for g in answer.grasps]).as_matrix()
     positions = np.array([g.position for g in answer.grasps])
+    on_grid = grips_antipodally(faces, positions, rotations, default_gripper(), np.radians(grid_angle))
+    assert on_grid.all() == (grid_angle == 35.0)
+    assert not on_grid.any() or grid_angle == 35.0
     assert grips_antipodally(cloud, positions, rotations, default_gripper(), np.radians(angle)).all()
 
 
