@@ -235,17 +235,20 @@ def antipodal_report(
             ]
             verdicts[surface, angle] = keeps
             _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
-    fine_angle = float(Settings.model_fields["antipodal_check_angle"].default)
-    if ("cloud", fine_angle) not in verdicts:
+    if not any(surface == "cloud" for surface, _ in verdicts):
         return
+    fine_angle = float(Settings.model_fields["antipodal_check_angle"].default)
+    fine = [
+        grips_antipodally(faces["cloud"], positions, rotations, None, np.radians(fine_angle))
+        for faces, positions, rotations, _ in judged
+    ]
     print(
         f"\nthe grid's faces first, the fine cloud's within {fine_angle:.0f} degrees where those keep none:"
     )
     print(header)
     for angle in grid_angles:
         keeps = [
-            grid if grid.any() else cloud
-            for grid, cloud in zip(verdicts["grid", angle], verdicts["cloud", fine_angle], strict=True)
+            grid if grid.any() else cloud for grid, cloud in zip(verdicts["grid", angle], fine, strict=True)
         ]
         _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
 

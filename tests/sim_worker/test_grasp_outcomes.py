@@ -35,7 +35,7 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert grasp_outcomes.main(argv) == 0, "a rerun resumes"
     assert "round 0" not in capsys.readouterr().out and stored.read_bytes() == written
     report_argv = ["report", str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95",
-                   "--antipodal-angles", "1", "30"]  # fmt: skip
+                   "--grid-angles", "1", "40", "--antipodal-angles", "1", "30"]  # fmt: skip
     assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
     assert f"{len(looks)} looks" in report and "min alignment | kept" in report
@@ -51,10 +51,13 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     ]
     assert int(looks_all) == int(looks_square)
     assert float(grasps_square) <= float(grasps_all)
-    # Each cone of the antipodal check splits the grasps that pass both checks into opposed and not; a
-    # 1-degree cone finds fewer opposed than a 30-degree one.
-    assert "cone (deg)" in report, report
-    rows = [line.split("|") for line in report.split("cone (deg)")[1].splitlines()[1:] if line.strip()]
-    totals = {int(row[1]) + int(row[3]) for row in rows}
+    # Each cone of the antipodal check, on the grid's faces, on the fine cloud and on the two in turn,
+    # splits the grasps that pass both checks into opposed and not; a 1-degree cone finds fewer opposed
+    # than a wider one.
+    tables = [part.split("\n\n")[0] for part in report.split("cone (deg)")[1:]]
+    assert len(tables) == 3, report
+    rows = [[line.split("|") for line in table.splitlines()[1:] if line.strip()] for table in tables]
+    totals = {int(row[1]) + int(row[3]) for table in rows for row in table}
     assert len(totals) == 1, "every cone splits the same grasps"
-    assert int(rows[1][1]) <= int(rows[2][1])
+    for table in rows:
+        assert len(table) == 2 and int(table[0][1]) <= int(table[1][1])
