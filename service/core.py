@@ -97,6 +97,7 @@ class PlanningService:
             settings.cloud_resolution,
             settings.cloud_max_pending_frames,
             cloud_fusion=CloudFusion(max_queued_bytes=int(settings.cloud_max_queued_mb * 2**20)),
+            register_scale=settings.depth_scale_registration,
         )
 
     @classmethod

@@ -98,8 +98,10 @@ class SessionStore:
         cloud_max_pending: int = 512,
         clock: Callable[[], float] = time.time,
         cloud_fusion: CloudFusion | None = None,
+        register_scale: bool = False,
     ) -> None:
         self.max_sessions = max_sessions
+        self.register_scale = register_scale
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
         self._cloud_max_pending = cloud_max_pending
@@ -127,6 +129,7 @@ class SessionStore:
             self._cloud_max_pending,
             self.cloud_fusion,
             spec.decay,
+            self.register_scale,
         )
         if snapshot is not None:
             volume.restore(snapshot.coarse, snapshot.fine)

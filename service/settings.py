@@ -190,6 +190,12 @@ class Settings(BaseSettings):
     cloud_resolution: int = Field(
         default=120, ge=16, le=400, description="voxels a side of the fine volume behind /cloud"
     )
+    depth_scale_registration: bool = Field(
+        default=True,
+        description="scale each depth frame about its camera so that its points meet the surface the session's "
+        "volume already holds before fusing it: a sensor whose distance error drifts from frame to frame "
+        "(a few per cent) otherwise fuses smeared, doubled surfaces (docs/concepts.md)",
+    )
     cloud_max_pending_frames: int = Field(
         default=512,
         ge=1,

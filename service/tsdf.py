@@ -11,6 +11,7 @@ import open3d as o3d
 import torch
 
 from service.cloud_fusion import CloudFusion, shared_fusion
+from service.depth_scale import SceneScale, depth_scale
 from vgn_contract.geometry import invert
 from vgn_contract.schemas import Intrinsics
 
@@ -154,6 +155,11 @@ class QueuedFrame:
     camera_in_workspace: np.ndarray
     max_depth: float
     decay: float | None = None  # the session's forgetting (TSDFVolume.integrate_forgetting)
+    scale: float = 1.0  # fused as depth * scale (``service.depth_scale``)
+
+    def scaled_depth(self) -> np.ndarray:
+        """The depth to fuse: float32 metres, times ``scale``."""
+        return self.depth if self.scale == 1.0 else self.depth.astype(np.float32) * np.float32(self.scale)
 
     @property
     def nbytes(self) -> int:
@@ -189,8 +195,12 @@ class SceneVolume:
 
     def __init__(self, size: float, resolution: int, workspace_pose: np.ndarray, cloud_resolution: int,
                  max_pending: int = 512, fusion: CloudFusion | None = None,
-                 decay: float | None = None) -> None:  # fmt: skip
+                 decay: float | None = None, register_scale: bool = False) -> None:  # fmt: skip
         self.max_pending = max_pending
+        #: Each frame is scaled about its camera to meet what the coarse volume holds before it is
+        #: fused (``service.depth_scale``).
+        self.register_scale = register_scale
+        self._scales = SceneScale()
         #: Forgetting: each frame first weighs the evidence it sees again by this
         #: (``TSDFVolume.integrate_forgetting``).
         self.decay = decay
@@ -220,6 +230,7 @@ class SceneVolume:
             self.coarse = TSDFVolume(self._size, self._resolution)
             self._fine = None
             self._drop_pending()
+            self._scales = SceneScale()
 
     def close(self) -> None:
         """The session is gone: free the queue and take no more frames for the cloud (an
@@ -236,6 +247,18 @@ class SceneVolume:
         camera_in_workspace = self._world_to_workspace @ camera_pose
         # Everything that could fail runs before the first volume changes.
         frame = QueuedFrame(compact_depth(depth), intrinsics, camera_in_workspace, max_depth, self.decay)
+        if self.register_scale:
+            tsdf = self.coarse.state().reshape(self._resolution, self._resolution, self._resolution, 2)
+            relative = 1.0
+            if tsdf[..., 1].any():
+                voxel_size = self._size / self._resolution
+                relative = depth_scale(depth, intrinsics, camera_in_workspace, tsdf, voxel_size, max_depth)
+            scaled = self._scales.add(frame, relative)
+            if len(scaled) > 1:  # the scene's scale moved: its first frames are fused again
+                self._refuse(scaled)
+                return
+            frame = scaled[0]
+            depth = depth if frame.scale == 1.0 else depth * np.float32(frame.scale)
         if self.decay is None:
             self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
         else:
@@ -256,6 +279,24 @@ class SceneVolume:
                         self._room.wait()
                 finally:
                     self._waiting -= 1
+        self._fusion.notify(self, frame=True)
+
+    def _refuse(self, frames: list[QueuedFrame]) -> None:
+        """Fuse the coarse volume again from ``frames`` (the session's first, at their new scales),
+        and queue them for a new fine volume in place of what it held."""
+        coarse = TSDFVolume(self._size, self._resolution)
+        for frame in frames:
+            depth = frame.scaled_depth()
+            if frame.decay is None:
+                coarse.integrate(depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
+            else:
+                coarse.integrate_forgetting(depth, frame.intrinsics, frame.camera_in_workspace,
+                                            frame.max_depth, frame.decay)  # fmt: skip
+        with self._fusing, self._lock:  # not while the worker fuses a frame into the old fine volume
+            self.coarse, self._fine = coarse, None
+            self._fusion.account(-sum(frame.nbytes for frame in self._pending))
+            self._pending = deque(frames)
+            self._fusion.account(sum(frame.nbytes for frame in frames))
         self._fusion.notify(self, frame=True)
 
     def grid(self) -> np.ndarray:
@@ -310,6 +351,7 @@ class SceneVolume:
         with self._lock:
             self._drop_pending()
             self.coarse, self._fine = volume, restored_fine
+            self._scales = SceneScale(settled=True)  # the restored volume's scale is the scene's
 
     # For the worker (service.cloud_fusion.FusionQueue) -----------------------------------------
     @property
@@ -347,10 +389,11 @@ class SceneVolume:
                 self._fine = TSDFVolume(self._size, self._cloud_resolution)
             fine = self._fine
         try:
+            depth = frame.scaled_depth()
             if frame.decay is None:
-                fine.integrate(frame.depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
+                fine.integrate(depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
             else:  # in upload order, as the coarse volume forgot
-                fine.integrate_forgetting(frame.depth, frame.intrinsics, frame.camera_in_workspace,
+                fine.integrate_forgetting(depth, frame.intrinsics, frame.camera_in_workspace,
                                           frame.max_depth, frame.decay)  # fmt: skip
         finally:  # a frame Open3D refuses is dropped rather than retried forever
             with self._lock:
