@@ -239,6 +239,10 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("opposed-faces-", "What does the antipodal check (answering only the grasps whose pads meet opposed faces of the "
                        "fine cloud, else the surface's pairs that pass every check) do to the default request? (Runs "
                        "that newer results replace in the README's table.)"),
+    ("grid-faces-", "What does judging the grasps' faces on the network's grid first (the fine cloud only where the "
+                    "grid keeps none) do to the default request? (Runs that newer results replace in the README's table.)"),
+    ("depth-scale-", "What does registering each frame's depth scale against the volume (settled over the first six "
+                     "frames) do, under depth noise and on clean depth, with the grid's faces judged first?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
                        "do to the default request? (Runs that newer results replace in the README's table.)"),
     ("surface-facing-", "Do antipodal pairs judged by the points that face each jaw (their mean normal, as on a cup's "
