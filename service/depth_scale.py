@@ -1,9 +1,8 @@
 """Registering a depth frame's scale against what a volume already holds.
 
 Depth sensors misjudge distance by a factor that drifts from frame to frame (temperature, exposure;
-the Dex-Net noise model draws it per frame with a 3 % standard deviation). Six frames each a
-centimetre or two off along their own rays fuse into smeared, doubled surfaces on which neither
-the network nor the checks find a grip. Before a frame is fused, this finds the factor that lays its
+the Dex-Net noise model draws one per frame). Frames each off along their own rays fuse into
+smeared, doubled surfaces on which neither the network nor the checks find a grip. Before a frame is fused, this finds the factor that lays its
 points on the volume's surface: the frame is scaled about its camera, which is what such an error
 does, so the volume keeps the scale of the frames before it (the first frame's).
 """
