@@ -255,7 +255,7 @@ class SceneVolume:
                 relative = depth_scale(depth, intrinsics, camera_in_workspace, tsdf, voxel_size, max_depth)
             scaled = self._scales.add(frame, relative)
             if len(scaled) > 1:  # the scene's scale moved: its first frames are fused again
-                self._refuse(scaled)
+                self._fuse_again(scaled)
                 return
             frame = scaled[0]
             depth = depth if frame.scale == 1.0 else depth * np.float32(frame.scale)
@@ -281,7 +281,7 @@ class SceneVolume:
                     self._waiting -= 1
         self._fusion.notify(self, frame=True)
 
-    def _refuse(self, frames: list[QueuedFrame]) -> None:
+    def _fuse_again(self, frames: list[QueuedFrame]) -> None:
         """Fuse the coarse volume again from ``frames`` (the session's first, at their new scales),
         and queue them for a new fine volume in place of what it held."""
         coarse = TSDFVolume(self._size, self._resolution)
@@ -293,6 +293,8 @@ class SceneVolume:
                 coarse.integrate_forgetting(depth, frame.intrinsics, frame.camera_in_workspace,
                                             frame.max_depth, frame.decay)  # fmt: skip
         with self._fusing, self._lock:  # not while the worker fuses a frame into the old fine volume
+            if self._closed or self._fusion.closed:  # the session or the service is gone
+                return
             self.coarse, self._fine = coarse, None
             self._fusion.account(-sum(frame.nbytes for frame in self._pending))
             self._pending = deque(frames)
