@@ -2,9 +2,10 @@
 
 Depth sensors misjudge distance by a factor that drifts from frame to frame (temperature, exposure;
 the Dex-Net noise model draws one per frame). Frames each off along their own rays fuse into
-smeared, doubled surfaces on which neither the network nor the checks find a grip. Before a frame is fused, this finds the factor that lays its
-points on the volume's surface: the frame is scaled about its camera, which is what such an error
-does, so the volume keeps the scale of the frames before it (the first frame's).
+smeared, doubled surfaces on which neither the network nor the checks find a grip. Before a frame
+is fused, ``depth_scale`` finds the factor that lays its points on the volume's surface (such an
+error scales a frame about its camera), and ``SceneScale`` settles the scene's own scale over its
+first frames, so that the volume does not keep the first frame's error.
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ from vgn_contract.schemas import Intrinsics
 @dataclass(frozen=True)
 class ScaleSearch:
     """How the factor is searched: every ``stride``-th pixel along rows and columns, factors within
-    ``max_error`` of 1 in ``coarse_steps`` steps, then ``fine_steps`` steps across the best coarse step;
-    at least ``min_points`` of the sampled points must fall in observed voxels of the volume."""
+    ``max_error`` of 1 in ``coarse_steps`` steps (judged on every third of those points), then
+    ``fine_steps`` steps across the best coarse step (on all of them); at least ``min_points`` of the
+    sampled points must fall in observed voxels of the volume."""
 
     stride: int = 10
     max_error: float = 0.10
@@ -62,16 +64,17 @@ def depth_scale(
     origin = camera_in_volume[:3, 3, None] / voxel_size - 0.5  # voxel values sit at voxel centres
     distance, observed = tsdf[..., 0], (tsdf[..., 1] > 0).astype(np.float64)
 
-    def cost(scale: float) -> float:
-        at = origin + scale * offsets
+    def cost(scale: float, every: int = 1) -> float:
+        at = origin + scale * offsets[:, ::every]
         seen = map_coordinates(observed, at, order=1, mode="constant", cval=0.0) > 0.999
-        if seen.sum() < search.min_points:
+        if seen.sum() * every < search.min_points:
             return np.inf
         near = np.abs(map_coordinates(distance, at[:, seen], order=1, mode="nearest"))
         return float(np.minimum(near, 1.0).sum() + (~seen).sum()) / len(seen)
 
+    # The coarse steps only pick where to look closer: a third of the points tell them apart.
     coarse = np.linspace(1.0 - search.max_error, 1.0 + search.max_error, search.coarse_steps)
-    costs = [cost(s) for s in coarse]
+    costs = [cost(s, every=3) for s in coarse]
     if not np.isfinite(min(costs)):
         return 1.0
     step = coarse[1] - coarse[0]
