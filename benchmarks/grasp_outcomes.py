@@ -238,7 +238,7 @@ def antipodal_report(
     if not any(surface == "cloud" for surface, _ in verdicts):
         return
     fine_angle = float(Settings.model_fields["antipodal_check_angle"].default)
-    fine = [
+    fine = verdicts.get(("cloud", fine_angle)) or [
         grips_antipodally(faces["cloud"], positions, rotations, None, np.radians(fine_angle))
         for faces, positions, rotations, _ in judged
     ]

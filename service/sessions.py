@@ -101,7 +101,7 @@ class SessionStore:
         register_scale: bool = False,
     ) -> None:
         self.max_sessions = max_sessions
-        self.register_scale = register_scale
+        self._register_scale = register_scale
         self.ttl_s = ttl_s
         self._cloud_resolution = cloud_resolution
         self._cloud_max_pending = cloud_max_pending
@@ -129,7 +129,7 @@ class SessionStore:
             self._cloud_max_pending,
             self.cloud_fusion,
             spec.decay,
-            self.register_scale,
+            self._register_scale,
         )
         if snapshot is not None:
             volume.restore(snapshot.coarse, snapshot.fine)

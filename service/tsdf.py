@@ -76,6 +76,16 @@ class TSDFVolume:
             self._buffer = _FrameBuffer(*depth.shape)
         self._volume.integrate(self._buffer.fill(depth, max_depth), _pinhole(intrinsics), extrinsic)
 
+    def fuse(
+        self, depth: np.ndarray, intrinsics: Intrinsics, camera_in_workspace: np.ndarray, max_depth: float,
+        decay: float | None,
+    ) -> None:  # fmt: skip
+        """``integrate``, or ``integrate_forgetting`` for a session that forgets (``decay`` set)."""
+        if decay is None:
+            self.integrate(depth, intrinsics, camera_in_workspace, max_depth)
+        else:
+            self.integrate_forgetting(depth, intrinsics, camera_in_workspace, max_depth, decay)
+
     def integrate_forgetting(
         self, depth: np.ndarray, intrinsics: Intrinsics, camera_in_workspace: np.ndarray, max_depth: float,
         decay: float,
@@ -158,7 +168,7 @@ class QueuedFrame:
     scale: float = 1.0  # fused as depth * scale (``service.depth_scale``)
 
     def scaled_depth(self) -> np.ndarray:
-        """The depth to fuse: float32 metres, times ``scale``."""
+        """The depth to fuse (metres): the compact copy, times ``scale`` in float32 where it is not 1."""
         return self.depth if self.scale == 1.0 else self.depth.astype(np.float32) * np.float32(self.scale)
 
     @property
@@ -259,10 +269,7 @@ class SceneVolume:
                 return
             frame = scaled[0]
             depth = depth if frame.scale == 1.0 else depth * np.float32(frame.scale)
-        if self.decay is None:
-            self.coarse.integrate(depth, intrinsics, camera_in_workspace, max_depth)
-        else:
-            self.coarse.integrate_forgetting(depth, intrinsics, camera_in_workspace, max_depth, self.decay)
+        self.coarse.fuse(depth, intrinsics, camera_in_workspace, max_depth, self.decay)
         while True:
             with self._lock:
                 if self._closed or self._fusion.closed:  # the session or the service is gone
@@ -286,12 +293,13 @@ class SceneVolume:
         and queue them for a new fine volume in place of what it held."""
         coarse = TSDFVolume(self._size, self._resolution)
         for frame in frames:
-            depth = frame.scaled_depth()
-            if frame.decay is None:
-                coarse.integrate(depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
-            else:
-                coarse.integrate_forgetting(depth, frame.intrinsics, frame.camera_in_workspace,
-                                            frame.max_depth, frame.decay)  # fmt: skip
+            coarse.fuse(
+                frame.scaled_depth(),
+                frame.intrinsics,
+                frame.camera_in_workspace,
+                frame.max_depth,
+                frame.decay,
+            )
         with self._fusing, self._lock:  # not while the worker fuses a frame into the old fine volume
             if self._closed or self._fusion.closed:  # the session or the service is gone
                 return
@@ -391,12 +399,14 @@ class SceneVolume:
                 self._fine = TSDFVolume(self._size, self._cloud_resolution)
             fine = self._fine
         try:
-            depth = frame.scaled_depth()
-            if frame.decay is None:
-                fine.integrate(depth, frame.intrinsics, frame.camera_in_workspace, frame.max_depth)
-            else:  # in upload order, as the coarse volume forgot
-                fine.integrate_forgetting(depth, frame.intrinsics, frame.camera_in_workspace,
-                                          frame.max_depth, frame.decay)  # fmt: skip
+            # In upload order, as the coarse volume forgot.
+            fine.fuse(
+                frame.scaled_depth(),
+                frame.intrinsics,
+                frame.camera_in_workspace,
+                frame.max_depth,
+                frame.decay,
+            )
         finally:  # a frame Open3D refuses is dropped rather than retried forever
             with self._lock:
                 if self._fine is fine and self._pending and self._pending[0] is frame:  # else reset
