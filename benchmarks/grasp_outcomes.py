@@ -79,7 +79,7 @@ def collect(args: argparse.Namespace) -> int:
             for round_id in range(args.rounds):
                 path = out / f"round{round_id:04d}.npz"
                 if not path.exists():
-                    looks = run_round(episode, round_id, args.candidates)
+                    looks = run_round(episode, round_id, args.candidates, args.pairs)
                     write_atomically(path, _npz_bytes(looks))
                     print(f"round {round_id}: {len(looks)} looks, "
                           f"{sum(len(look['grasps']) for look in looks)} grasps executed", flush=True)  # fmt: skip
@@ -88,8 +88,12 @@ def collect(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_round(episode: ClutterRemoval, round_id: int, candidates: float) -> list[dict[str, np.ndarray]]:
-    """One round: at every look, every candidate grasp executed from the same state."""
+def run_round(
+    episode: ClutterRemoval, round_id: int, candidates: float, pairs: int = 0
+) -> list[dict[str, np.ndarray]]:
+    """One round: at every look, every candidate grasp executed from the same state, and with
+    ``pairs`` > 0 up to that many of the surface's antipodal pairs that clear the approach (the
+    round then goes on with a random pair where the network offers nothing, as the service does)."""
     rng = episode.new_scene(round_id)
     vgn, world = episode.vgn, episode.world
     looks, failures = [], 0
@@ -100,17 +104,23 @@ def run_round(episode: ClutterRemoval, round_id: int, candidates: float) -> list
                            max_grasps=500).grasps  # fmt: skip
         checked = vgn.grasps(session, threshold=candidates, turn_average=True, clearance=True, grip=False,
                              max_grasps=500).grasps  # fmt: skip
-        state = world.save_state()
-        outcomes = []
-        for grasp in every:
-            trial = execute_grasp(world, episode.gripper, grasp.as_matrix(), remove_grasped=False)
-            outcomes.append(OUTCOMES.index(trial.outcome))
-            world.restore_state(state)
-        world.discard_state(state)
-        rows = candidate_rows(every, {_key(g) for g in checked})
-        looks.append({"grasps": rows, "outcomes": np.array(outcomes, np.int8), "grid": vgn.tsdf(session),
-                      "cloud": vgn.cloud(session)})  # fmt: skip
-        default = [g for g in checked if g.quality >= DEFAULT_THRESHOLD]
+        look = {"grasps": candidate_rows(every, {_key(g) for g in checked}),
+                "outcomes": _executed(episode, every), "grid": vgn.tsdf(session), "cloud": vgn.cloud(session)}  # fmt: skip
+        surface: list[Grasp] = []
+        if pairs:
+            # The pairs the service falls back on, down to its fallback floor; the report replays
+            # the thresholds and checks that choose among them.
+            surface = vgn.grasps(session, planner="antipodal", threshold=candidates, clearance=True, grip=False,
+                                 max_grasps=500).grasps  # fmt: skip
+            if len(surface) > pairs:  # a draw of its own: the round goes on as without pairs
+                drawn = np.random.default_rng([round_id, len(looks)]).choice(
+                    len(surface), pairs, replace=False
+                )
+                surface = [surface[i] for i in np.sort(drawn)]
+            look |= {"pairs": candidate_rows(surface, {_key(g) for g in surface}),
+                     "pair_outcomes": _executed(episode, surface)}  # fmt: skip
+        looks.append(look)
+        default = [g for g in checked if g.quality >= DEFAULT_THRESHOLD] or surface
         if not default:
             break
         trial = execute_grasp(world, episode.gripper, default[int(rng.integers(len(default)))].as_matrix())
@@ -118,6 +128,19 @@ def run_round(episode: ClutterRemoval, round_id: int, candidates: float) -> list
         world.wait_for_rest()
         world.remove_objects_outside()
     return looks
+
+
+def _executed(episode: ClutterRemoval, grasps: list[Grasp]) -> np.ndarray:
+    """Each grasp's outcome (its index in ``OUTCOMES``), every one executed from the current state."""
+    world = episode.world
+    state = world.save_state()
+    outcomes = []
+    for grasp in grasps:
+        trial = execute_grasp(world, episode.gripper, grasp.as_matrix(), remove_grasped=False)
+        outcomes.append(OUTCOMES.index(trial.outcome))
+        world.restore_state(state)
+    world.discard_state(state)
+    return np.array(outcomes, np.int8)
 
 
 def _npz_bytes(looks: list[dict[str, np.ndarray]]) -> bytes:
@@ -132,7 +155,7 @@ def load_looks(folder: Path) -> list[dict[str, np.ndarray]]:
     looks = []
     for path in sorted(folder.glob("round*.npz")):
         with np.load(path) as data:
-            looks += [{name: data[f"{name}{i}"] for name in ("grasps", "outcomes", "grid", "cloud")
+            looks += [{name: data[f"{name}{i}"] for name in ("grasps", "outcomes", "grid", "cloud", "pairs", "pair_outcomes")
                        if f"{name}{i}" in data} for i in range(int(data["looks"]))]  # fmt: skip
     return looks
 
@@ -328,6 +351,8 @@ def main(argv: list[str] | None = None) -> int:
     run.add_argument("--noise", action="store_true", help="Dex-Net depth noise on every view")
     run.add_argument("--views", choices=["six", "side"], default="six", help="six views, or one side view")
     run.add_argument("--candidates", type=float, default=0.5, help="least quality of an executed candidate")
+    run.add_argument("--pairs", type=int, default=0,
+                     help="also execute up to this many of the surface's antipodal pairs per look (clearance-checked)")  # fmt: skip
     run.add_argument("--out", type=Path, required=True)
     show = commands.add_parser("report", help="the grip check's verdicts against the executed outcomes")
     show.add_argument("folder", type=Path)

@@ -358,7 +358,12 @@ class PlanningService:
                     plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(lower), session_hand), None
                 )
             if pairs is not None and pairs.grasps:
-                checked, model = pairs, "antipodal"
+                # Those whose pads meet opposed faces of the grid's surface too, where there are some.
+                grid_cone = math.radians(self.settings.antipodal_check_grid_angle)
+                kept = (
+                    opposed_grasps(pairs.grasps, faces, session_hand, grid_cone) if faces is not None else []
+                )
+                checked, model = (replace(pairs, grasps=kept) if kept else pairs), "antipodal"
             else:
                 checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
         grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
@@ -389,21 +394,23 @@ class PlanningService:
         query: GraspQuery,
         workspace_pose: np.ndarray,
     ) -> tuple[Checked, str]:
-        """The antipodal check on checked VGN grasps: those whose pads meet opposed faces of the grid's
-        surface (``faces``); where none does, those whose pads meet opposed faces of the fine cloud;
-        where none does there either, the surface's antipodal pairs that pass every check; where there
-        are none of those, the grasps as they were. Returns the grasps and the model that answers."""
-        rotations = Rotation.from_quat([g.orientation for g in checked.grasps]).as_matrix()
-        positions = np.array([g.position for g in checked.grasps])
-        for cloud, angle in (
-            (lambda: faces, self.settings.antipodal_check_grid_angle),
-            (fine_cloud, self.settings.antipodal_check_angle),
-        ):
-            opposed = grips_antipodally(cloud(), positions, rotations, hand, math.radians(angle))
-            if opposed.any():
-                kept = [g for g, keep in zip(checked.grasps, opposed, strict=True) if keep]
-                return replace(checked, grasps=kept), model
+        """The antipodal check on checked VGN grasps. In turn, the first of these that is not empty
+        answers: the VGN grasps whose pads meet opposed faces of the grid's surface (``faces``); the
+        surface's antipodal pairs that pass every check and meet opposed faces of the grid's surface
+        too; the VGN grasps whose pads meet opposed faces of the fine cloud; the other checked pairs;
+        the VGN grasps as they were. Returns the grasps and the model that answers."""
+        grid_cone = math.radians(self.settings.antipodal_check_grid_angle)
+        kept = opposed_grasps(checked.grasps, faces, hand, grid_cone)
+        if kept:
+            return replace(checked, grasps=kept), model
         pairs = checked_of(plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(query), hand))
+        kept = opposed_grasps(pairs.grasps, faces, hand, grid_cone)
+        if kept:
+            return replace(pairs, grasps=kept), "antipodal"
+        fine_cone = math.radians(self.settings.antipodal_check_angle)
+        kept = opposed_grasps(checked.grasps, fine_cloud(), hand, fine_cone)
+        if kept:
+            return replace(checked, grasps=kept), model
         return (pairs, "antipodal") if pairs.grasps else (checked, model)
 
     def network_for(self, frame_count: int, hand: GripperDescription) -> GraspPlanner:
@@ -478,6 +485,19 @@ def described(network: GraspPlanner, model: type[Described], gripper: str) -> De
         return None
     return model(model_id=network.model_id, source=network.source, threshold=network.default_threshold,
                  gripper=gripper, card=network.card)  # fmt: skip
+
+
+def opposed_grasps(
+    grasps: list[Grasp], cloud: np.ndarray, hand: GripperDescription, cone: float
+) -> list[Grasp]:
+    """The ``grasps`` whose pads meet opposed faces of ``cloud`` (world points and normals) within
+    ``cone`` radians of the closing axis, in their order."""
+    if not grasps:
+        return []
+    rotations = Rotation.from_quat([g.orientation for g in grasps]).as_matrix()
+    positions = np.array([g.position for g in grasps])
+    opposed = grips_antipodally(cloud, positions, rotations, hand, cone)
+    return [grasp for grasp, keep in zip(grasps, opposed, strict=True) if keep]
 
 
 def load_one_view(settings: Settings, main: GraspPlanner) -> GraspPlanner | None:

@@ -463,4 +463,6 @@ def _grasp_row(record: RoundRecord, grasp: Grasp, trial: GraspTrial, observed: O
         "trial_time": round(trial.seconds, 4),
         "frames": observed.frames,
         "first_grasp_ms": observed.first_grasp_ms,
+        "model": answer.model,
+        "threshold": answer.threshold,
     }

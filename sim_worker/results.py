@@ -72,6 +72,9 @@ GRASP_COLUMNS = [
     "disturbance",
     "loop",
     "looks",
+    # what answered the look: the weights' id or "antipodal" (the surface's pairs), at which threshold
+    "model",
+    "threshold",
 ]
 
 
