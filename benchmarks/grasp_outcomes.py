@@ -8,7 +8,7 @@ random grasp of the default request). Each round's candidates, their outcomes, t
 the fine cloud go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes).
 
     python -m benchmarks.grasp_outcomes collect --scene pile --objects OBJ/pile/train --rounds 33 --seed 11 --out DIR
-    python -m benchmarks.grasp_outcomes report DIR
+    python -m benchmarks.grasp_outcomes report DIR [DIR ...]
 
 ``report`` replays the grip check (``service.grip``) on the stored grids at several alignment
 thresholds and prints, among the grasps a request without it would return (quality >= 0.8 and
@@ -162,9 +162,9 @@ def load_looks(folder: Path) -> list[dict[str, np.ndarray]]:
 
 def report(args: argparse.Namespace) -> int:
     """Print what the grip check keeps and drops of the default answer at each threshold."""
-    looks = load_looks(args.folder)
+    looks = [look for folder in args.folders for look in load_looks(folder)]
     if not looks:
-        print(f"no rounds in {args.folder}")
+        print(f"no rounds in {', '.join(map(str, args.folders))}")
         return 1
     voxel_size = args.size / looks[0]["grid"].shape[0]
     success = OUTCOMES.index(Outcome.SUCCESS)
@@ -209,6 +209,9 @@ def report(args: argparse.Namespace) -> int:
     support_report(looks, voxel_size)
     print()
     antipodal_report(looks, voxel_size, args.grid_angles, args.antipodal_angles)
+    if any("pairs" in look for look in looks):
+        print()
+        pairs_report([look for look in looks if "pairs" in look], voxel_size)
     return 0
 
 
@@ -274,6 +277,88 @@ def antipodal_report(
             grid if grid.any() else cloud for grid, cloud in zip(verdicts["grid", angle], fine, strict=True)
         ]
         _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
+
+
+#: The antipodal check's answers in turn, the first that is not empty answering (``pairs_report``):
+#: where some network grasp passes the clearance and grip checks, and where none does (the fallback).
+TIER_ORDERS = {
+    "the fine cloud before the pairs": (("grid", "cloud", "pairs", "checked"), ("every pair", "lower")),
+    "the grid's opposed pairs first": (
+        ("grid", "grid pairs", "cloud", "pairs", "checked"),
+        ("every grid pair", "every pair", "lower"),
+    ),
+}
+
+
+def pairs_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats: int = 5000) -> None:
+    """Print how often a random grasp of each look's answer succeeds under each order of the antipodal
+    check's answers (``TIER_ORDERS``), from the executed network grasps and surface pairs of a
+    ``collect --pairs`` run, and the paired difference over the looks with a bootstrap interval."""
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
+                            for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
+    per_order: dict[str, list[float]] = {name: [] for name in TIER_ORDERS}
+    answered_by: dict[str, dict[str, int]] = {name: {} for name in TIER_ORDERS}
+    for look in looks:
+        answers = _tier_answers(look, voxel_size, grid_cone, fine_cone)
+        held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
+        for name, (checked, fallback) in TIER_ORDERS.items():
+            order = checked if len(answers["checked"][1]) else fallback
+            tier = next((tier for tier in order if len(held[tier])), None)
+            per_order[name].append(float(np.mean(held[tier])) if tier else np.nan)
+            answered_by[name][tier or "nothing"] = answered_by[name].get(tier or "nothing", 0) + 1
+    print(f"{len(looks)} looks with the surface's pairs executed; a random grasp of each look's answer:")
+    print("order | looks answered | success % per look | answered by")
+    for name, values in per_order.items():
+        answered = [v for v in values if not np.isnan(v)]
+        tiers = ", ".join(f"{tier} {count}" for tier, count in answered_by[name].items())
+        print(f"{name} | {len(answered)} | {_percent(answered)} | {tiers}")
+    first, second = (np.array(v) for v in per_order.values())
+    both = ~np.isnan(first) & ~np.isnan(second)
+    difference = second[both] - first[both]
+    draws = np.random.default_rng(0).choice(difference, (repeats, len(difference))).mean(axis=1)
+    low, high = np.percentile(draws, [2.5, 97.5]) * 100
+    print(f"second minus first, paired over {both.sum()} looks ({np.count_nonzero(difference)} differ): "
+          f"{100 * difference.mean():+.1f} points per look (95 % bootstrap interval {low:+.1f} to {high:+.1f})")  # fmt: skip
+
+
+def _tier_answers(
+    look: dict[str, np.ndarray], voxel_size: float, grid_cone: float, fine_cone: float
+) -> dict[str, tuple[str, np.ndarray]]:
+    """Each candidate answer of one look, as (outcomes key, row indices): the network's grasps that
+    pass both checks ("checked"), those opposed on the grid's faces ("grid") or the fine cloud
+    ("cloud"); the pairs that pass the grip check ("pairs") and those opposed on the grid's faces
+    ("grid pairs"); every clearance-checked pair ("every pair", "every grid pair"); and the network's
+    grasps that pass both checks down to the fallback floor ("lower")."""
+    grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
+    faces = grid_surface_cloud(grid, voxel_size)
+
+    def gripping(rows: np.ndarray, indices: np.ndarray) -> np.ndarray:
+        if not len(indices):
+            return indices
+        return indices[
+            measure_grip(grid, voxel_size, rows[indices, :3], rows[indices, 3:7], support="find").passes()
+        ]
+
+    def opposed(rows: np.ndarray, indices: np.ndarray, cloud: np.ndarray, cone: float) -> np.ndarray:
+        if not len(indices):
+            return indices
+        rotations = Rotation.from_quat(rows[indices, 3:7]).as_matrix()
+        return indices[grips_antipodally(cloud, rows[indices, :3], rotations, None, cone)]
+
+    checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)))
+    gripping_pairs = gripping(pairs, np.arange(len(pairs)))
+    every_pair = np.arange(len(pairs))
+    return {
+        "checked": ("outcomes", checked),
+        "grid": ("outcomes", opposed(grasps, checked, faces, grid_cone)),
+        "cloud": ("outcomes", opposed(grasps, checked, look["cloud"], fine_cone)),
+        "pairs": ("pair_outcomes", gripping_pairs),
+        "grid pairs": ("pair_outcomes", opposed(pairs, gripping_pairs, faces, grid_cone)),
+        "every pair": ("pair_outcomes", every_pair),
+        "every grid pair": ("pair_outcomes", opposed(pairs, every_pair, faces, grid_cone)),
+        "lower": ("outcomes", gripping(grasps, np.flatnonzero(grasps[:, 9] > 0))),
+    }
 
 
 def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -> None:
@@ -355,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
                      help="also execute up to this many of the surface's antipodal pairs per look (clearance-checked)")  # fmt: skip
     run.add_argument("--out", type=Path, required=True)
     show = commands.add_parser("report", help="the grip check's verdicts against the executed outcomes")
-    show.add_argument("folder", type=Path)
+    show.add_argument("folders", type=Path, nargs="+", help="collect's output folders, read together")
     show.add_argument("--alignments", type=float, nargs="+", default=[0.4, 0.5, 0.6, 0.7])
     show.add_argument("--preferred", type=float, nargs="+", default=[0.5, 0.6, 0.7, 0.8],
                       help="preferred alignments to compare (0.5: no preference)")  # fmt: skip

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from service.baseline import grips_antipodally
-from service.checks import SUPPORT_CONTACT_TOLERANCE, check_grasps, contact_tolerances
+from service.checks import SUPPORT_CONTACT_TOLERANCE, Checked, check_grasps, contact_tolerances
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grid_surface import grid_surface_points
@@ -134,7 +134,7 @@ def test_before_the_lower_threshold_the_surfaces_antipodal_pairs_are_checked_and
     """A low slab (10 x 6 x 2.5 cm): the packaged model offers nothing at its operating threshold and a
     few grasps below it, while the slab's sides make antipodal pairs that pass the clearance check.
     The pairs come first (in simulation they held more often than the network's grasps below its
-    threshold); without them the network's lower-threshold grasps answer."""
+    threshold), those whose pads meet opposed faces of the grid's surface where some do; without them the network's lower-threshold grasps answer."""
     settings = Settings(model=PACKAGED_MODEL, api_key=None, surface_fallback=surface_fallback)
     service = PlanningService.from_settings(settings)
     try:
@@ -150,7 +150,16 @@ def test_before_the_lower_threshold_the_surfaces_antipodal_pairs_are_checked_and
             return
         assert answer.grasps and answer.model == "antipodal"
         with service.sessions.use(session) as state:
-            surface = state.volume.surface_points()
+            surface, faces = state.volume.surface_points(), state.volume.surface_cloud()
+        every = service.plan(session, GraspQuery(planner="antipodal", threshold=settings.fallback_threshold,
+                                                 grip=False, max_grasps=None)).grasps  # fmt: skip
+        cone = np.radians(settings.antipodal_check_grid_angle)
+        on_grid = [grips_antipodally(faces, [g.position], Rotation.from_quat([g.orientation]).as_matrix(),
+                                     default_gripper(), cone)[0] for g in every]  # fmt: skip
+        # Those whose pads meet opposed faces of the grid's surface too, where some do (the slab's sides
+        # are too low for the grid's faces to show them: here none does, and all of them answer).
+        kept = [g for g, keep in zip(every, on_grid, strict=True) if keep] or every
+        assert {tuple(g.position) for g in answer.grasps} <= {tuple(g.position) for g in kept}
         # Each passes the clearance check as it is offered; the grip check is not theirs to pass:
         # the pairs met their own antipodal test on the fine cloud, where the coarse grid blurs thin walls.
         again = check_grasps(answer.grasps, surface, None, VOXEL, np.eye(4), SIZE, service.grip_config,
@@ -231,6 +240,44 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
     assert on_grid.all() == (grid_angle == 35.0)
     assert not on_grid.any() or grid_angle == 35.0
     assert grips_antipodally(cloud, positions, rotations, default_gripper(), np.radians(angle)).all()
+
+
+def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cloud_is_asked():
+    """The network's grasps on the box, turned 45 degrees about their approach, close on its edges (those
+    whose pads still meet opposed faces aside): their pads meet no opposed faces of the grid's surface within 35 degrees, though a fine-cloud cone of 89
+    degrees would keep them. The surface's pairs whose pads meet the grid's opposed faces come before
+    that verdict: they answer, each passing every check and opposed on the grid."""
+    service = PlanningService.from_settings(
+        Settings(model=PACKAGED_MODEL, api_key=None, antipodal_check_angle=89.0)
+    )
+    try:
+        session = fused_session(service)
+        plain = service.plan(session, GraspQuery(threshold=0.5, clearance=False, grip=False)).grasps
+        cloud, grid = service.cloud(session), service.grid(session)
+        with service.sessions.use(session) as state:
+            surface, faces = state.volume.surface_points(), state.volume.surface_cloud()
+        turn = Rotation.from_euler("z", 45.0, degrees=True)
+        turned = [g.model_copy(update={"orientation": (Rotation.from_quat(g.orientation) * turn).as_quat().tolist()})
+                  for g in plain]  # fmt: skip
+
+        def checked_of(grasps: list[Grasp]):
+            return check_grasps(grasps, surface, grid, VOXEL, np.eye(4), SIZE, service.grip_config, False)
+
+        def opposed(grasps: list[Grasp], points: np.ndarray, degrees: float) -> np.ndarray:
+            rotations = Rotation.from_quat([g.orientation for g in grasps]).as_matrix()
+            positions = np.array([g.position for g in grasps])
+            return grips_antipodally(points, positions, rotations, default_gripper(), np.radians(degrees))
+
+        turned = [g for g, keep in zip(turned, opposed(turned, faces, 35.0), strict=True) if not keep]
+        assert turned and opposed(turned, cloud, 89.0).any()
+        unchecked = Checked(turned, clearance_dropped=0, grip_dropped=0, replaced=0)
+        answer, model = service._opposed(unchecked, "vgn", faces, lambda: cloud, default_gripper(), checked_of,
+                                         GraspQuery(), np.eye(4))  # fmt: skip
+    finally:
+        service.close()
+    assert model == "antipodal" and answer.grasps
+    assert opposed(answer.grasps, faces, 35.0).all()
+    assert checked_of(answer.grasps).grasps == answer.grasps  # each passes both checks as it is offered
 
 
 def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():

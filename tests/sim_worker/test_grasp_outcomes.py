@@ -1,5 +1,6 @@
 """``benchmarks.grasp_outcomes``: every candidate grasp of a real clutter-removal round executed in
-PyBullet against a real service, stored, resumed and replayed through the grip check."""
+PyBullet against a real service, with the surface's pairs, stored, resumed and replayed through the
+checks."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ from sim_worker.grasping import Outcome
 def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     out = tmp_path / "outcomes"
     argv = ["collect", "--scene", "blocks", "--objects", "blocks", "--object-count", "3", "--rounds", "1",
-            "--seed", "3", "--out", str(out)]  # fmt: skip
+            "--seed", "3", "--pairs", "4", "--out", str(out)]  # fmt: skip
     assert grasp_outcomes.main(argv) == 0
     stored = out / "round0000.npz"
     written = stored.read_bytes()
@@ -30,15 +31,18 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
         assert set(np.unique(grasps[:, 9])) <= {0.0, 1.0}
         assert np.all((outcomes >= 0) & (outcomes < len(Outcome)))
         assert Outcome.INTERRUPTED not in {list(Outcome)[o] for o in outcomes}
+        pairs = look["pairs"]  # the surface's clearance-checked pairs, four at most, each executed
+        assert pairs.shape == (len(look["pair_outcomes"]), 10) and len(pairs) <= 4
+        assert np.all(pairs[:, 8] >= 0.5) and np.all(pairs[:, 9] == 1.0)
     assert any(len(look["outcomes"]) for look in looks)
     capsys.readouterr()
     assert grasp_outcomes.main(argv) == 0, "a rerun resumes"
     assert "round 0" not in capsys.readouterr().out and stored.read_bytes() == written
-    report_argv = ["report", str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95",
+    report_argv = ["report", str(out), str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95",
                    "--grid-angles", "1", "40", "--antipodal-angles", "1", "30"]  # fmt: skip
     assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
-    assert f"{len(looks)} looks" in report and "min alignment | kept" in report
+    assert f"{2 * len(looks)} looks" in report and "min alignment | kept" in report  # the folder twice
     assert "as the grid shows them" in report and "by their horizontal normal" in report
     thresholds, preferences = report.split("preferred alignment |")
     # Each threshold splits the same grasps into kept and dropped ones.
@@ -61,3 +65,7 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert len(totals) == 1, "every cone splits the same grasps"
     for table in rows:
         assert len(table) == 2 and int(table[0][1]) <= int(table[1][1])
+    # Both orders of the antipodal check's answers answer the same looks (they differ in what answers).
+    orders = report.split("a random grasp of each look's answer:")[1].splitlines()[2:4]
+    assert len({line.split("|")[1] for line in orders}) == 1, report
+    assert "second minus first, paired over" in report
