@@ -242,7 +242,11 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("grid-faces-", "What does judging the grasps' faces on the network's grid first (the fine cloud only where the "
                     "grid keeps none) do to the default request? (Runs that newer results replace in the README's table.)"),
     ("depth-scale-", "What does registering each frame's depth scale against the volume (settled over the first six "
-                     "frames) do, under depth noise and on clean depth, with the grid's faces judged first?"),
+                     "frames) do, under depth noise and on clean depth, with the grid's faces judged first? (Runs "
+                     "that newer results replace in the README's table.)"),
+    ("grid-pairs-", "What does answering with the surface's pairs whose pads meet opposed faces of the grid, before "
+                    "the fine cloud's verdict on the network's grasps, do to the default request?"),
+    ("seed-2-", "Does a second seed (another draw of scenes, the same command) agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
                        "do to the default request? (Runs that newer results replace in the README's table.)"),
     ("surface-facing-", "Do antipodal pairs judged by the points that face each jaw (their mean normal, as on a cup's "

@@ -119,12 +119,13 @@ class Settings(BaseSettings):
     antipodal_check: bool = Field(
         default=True,
         description="where the grip check runs, keep only the checked VGN grasps whose fingers close "
-        "on opposed faces: first on the network's grid (its surface, normals from the TSDF gradient, within "
-        "VGN_ANTIPODAL_CHECK_GRID_ANGLE of the closing axis); where none does, on the fine cloud (within "
-        "VGN_ANTIPODAL_CHECK_ANGLE); where none does there either, answer with the surface's antipodal pairs "
-        "that pass every check (the answer's model says 'antipodal'), and where there are none of those, "
-        "with the checked grasps as they were: a grasp whose pads meet slanted or one-sided faces slips "
-        "more often than one that meets opposed faces (docs/concepts.md)",
+        "on opposed faces of the network's grid (its surface, normals from the TSDF gradient, within "
+        "VGN_ANTIPODAL_CHECK_GRID_ANGLE of the closing axis); where none does, the surface's antipodal pairs "
+        "that pass every check and close on the grid's opposed faces too (the answer's model says "
+        "'antipodal'); where there are none, the VGN grasps that close on opposed faces of the fine cloud "
+        "(within VGN_ANTIPODAL_CHECK_ANGLE), then the other checked pairs, then the checked grasps as they "
+        "were: a grasp whose pads meet slanted or one-sided faces slips more often than one that meets "
+        "opposed faces (docs/concepts.md)",
     )
     antipodal_check_grid_angle: float = Field(
         default=35.0,
