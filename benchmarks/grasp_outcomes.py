@@ -15,8 +15,11 @@ thresholds and prints, among the grasps a request without it would return (quali
 clearance-checked), how many it keeps and drops and how often each group succeeded; then, for
 several preferred alignments, how often a random grasp of each look's answer succeeds; then, for
 several cones of the antipodal check (``--antipodal-angles``), the same for the grasps that pass both
-checks, judged by the faces their pads meet on the fine cloud. Choose settings on *training*
-objects; benchmark on held-out ones.
+checks, judged by the faces their pads meet on the fine cloud. With ``collect --pairs N`` each look
+also executes up to N of the surface's antipodal pairs (the service's answer where the network's
+grasps fail the checks), and the report ends with how often a random grasp of each look's answer
+succeeds under each order of the antipodal check's answers (``TIER_ORDERS``). Choose settings on
+*training* objects; benchmark on held-out ones.
 """
 
 from __future__ import annotations

@@ -14,7 +14,13 @@ from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
 from sim_worker.results import GRASP_COLUMNS, ResultsFolder, RoundRecord
 from tests.helpers.runs import check_results, clear_scene, read_csv
 from vgn_contract.gripper_description import builtin_gripper
-from vgn_contract.schemas import GraspDefaults, GraspResult, ModelInfo, OneViewModel
+from vgn_contract.schemas import (
+    ANTIPODAL_DEFAULT_THRESHOLD,
+    GraspDefaults,
+    GraspResult,
+    ModelInfo,
+    OneViewModel,
+)
 
 VGN_COLUMNS = ["round_id", "scene_id", "qx", "qy", "qz", "qw", "x", "y", "z", "width", "score", "label",
                "integration_time", "planning_time"]  # fmt: skip
@@ -456,4 +462,8 @@ def test_a_random_view_is_drawn_anew_for_every_look(tmp_path: Path, monkeypatch)
     check_results(results, 1)
     rows = read_csv(results / "grasps.csv")
     assert {row["frames"] for row in rows} <= {"1"}
+    # Each attempt says what answered its look, at which threshold: the baseline's own here.
+    assert rows and {(row["model"], row["threshold"]) for row in rows} == {
+        ("antipodal", str(ANTIPODAL_DEFAULT_THRESHOLD))
+    }
     assert json.loads((results / "config.json").read_text())["views"] == "random"
