@@ -42,6 +42,7 @@ from service.settings import Settings
 from sim_worker.clutter import MAX_CONSECUTIVE_FAILURES, ClutterConfig, ClutterRemoval
 from sim_worker.grasping import Outcome, execute_grasp
 from sim_worker.results import ResultsFolder
+from vgn_contract.gripper_description import default_gripper
 from vgn_contract.schemas import Grasp
 from vgn_data.files import write_atomically
 
@@ -214,7 +215,7 @@ def report(args: argparse.Namespace) -> int:
     antipodal_report(looks, voxel_size, args.grid_angles, args.antipodal_angles)
     if any("pairs" in look for look in looks):
         print()
-        pairs_report([look for look in looks if "pairs" in look], voxel_size)
+        pairs_report([look for look in looks if "pairs" in look], voxel_size, args.pair_shares)
     return 0
 
 
@@ -293,23 +294,41 @@ TIER_ORDERS = {
 }
 
 
-def pairs_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats: int = 5000) -> None:
+def pairs_report(
+    looks: list[dict[str, np.ndarray]], voxel_size: float, shares: list[float], repeats: int = 5000
+) -> None:
     """Print how often a random grasp of each look's answer succeeds under each order of the antipodal
     check's answers (``TIER_ORDERS``), from the executed network grasps and surface pairs of a
-    ``collect --pairs`` run, and the paired difference over the looks with a bootstrap interval."""
+    ``collect --pairs`` run, and the paired difference over the looks with a bootstrap interval; then
+    the same for the last order with its pairs narrowed to each of ``shares`` of the hand's opening."""
     success = OUTCOMES.index(Outcome.SUCCESS)
     grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
                             for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
     per_order: dict[str, list[float]] = {name: [] for name in TIER_ORDERS}
     answered_by: dict[str, dict[str, int]] = {name: {} for name in TIER_ORDERS}
+    narrow: dict[float, list[float]] = {share: [] for share in shares}
+    max_opening = default_gripper().max_opening
     for look in looks:
         answers = _tier_answers(look, voxel_size, grid_cone, fine_cone)
         held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
+        tiers = {}
         for name, (checked, fallback) in TIER_ORDERS.items():
             order = checked if len(answers["checked"][1]) else fallback
-            tier = next((tier for tier in order if len(held[tier])), None)
+            tier = tiers[name] = next((tier for tier in order if len(held[tier])), None)
             per_order[name].append(float(np.mean(held[tier])) if tier else np.nan)
             answered_by[name][tier or "nothing"] = answered_by[name].get(tier or "nothing", 0) + 1
+        # The last order's answer again, its pairs narrowed to those within each share of the opening.
+        tier = tiers[list(TIER_ORDERS)[-1]]
+        for share in shares:
+            if tier is None:
+                narrow[share].append(np.nan)
+                continue
+            source, rows = answers[tier]
+            kept = held[tier]
+            if source == "pair_outcomes":
+                within = look["pairs"][rows, 7] <= share * max_opening
+                kept = kept[within] if within.any() else kept
+            narrow[share].append(float(np.mean(kept)))
     print(f"{len(looks)} looks with the surface's pairs executed; a random grasp of each look's answer:")
     print("order | looks answered | success % per look | answered by")
     for name, values in per_order.items():
@@ -317,12 +336,23 @@ def pairs_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats:
         tiers = ", ".join(f"{tier} {count}" for tier, count in answered_by[name].items())
         print(f"{name} | {len(answered)} | {_percent(answered)} | {tiers}")
     first, second = (np.array(v) for v in per_order.values())
+    print(f"second minus first, {_paired(first, second, repeats)}")
+    print(f"\nthe last order, its pairs narrowed to those that close on at most a share of the {max_opening * 100:.0f} "
+          "cm opening where some do; against all of its pairs:")  # fmt: skip
+    print("share of the opening | success % per look | paired difference")
+    for share, values in narrow.items():
+        per_look = [v for v in values if not np.isnan(v)]
+        print(f"{share:20.3f} | {_percent(per_look):>18} | {_paired(second, np.array(values), repeats)}")
+
+
+def _paired(first: np.ndarray, second: np.ndarray, repeats: int) -> str:
+    """The mean per-look difference of ``second`` over ``first`` with a bootstrap interval."""
     both = ~np.isnan(first) & ~np.isnan(second)
     difference = second[both] - first[both]
     draws = np.random.default_rng(0).choice(difference, (repeats, len(difference))).mean(axis=1)
     low, high = np.percentile(draws, [2.5, 97.5]) * 100
-    print(f"second minus first, paired over {both.sum()} looks ({np.count_nonzero(difference)} differ): "
-          f"{100 * difference.mean():+.1f} points per look (95 % bootstrap interval {low:+.1f} to {high:+.1f})")  # fmt: skip
+    return (f"paired over {both.sum()} looks ({np.count_nonzero(difference)} differ): {100 * difference.mean():+.1f} "
+            f"points per look (95 % bootstrap interval {low:+.1f} to {high:+.1f})")  # fmt: skip
 
 
 def _tier_answers(
@@ -451,6 +481,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="cones (degrees) of the antipodal check on the grid's faces to compare")  # fmt: skip
     show.add_argument("--antipodal-angles", type=float, nargs="+", default=[10.0, 15.0, 20.0, 25.0, 30.0],
                       help="cones (degrees) of the antipodal check on the fine cloud to compare")  # fmt: skip
+    show.add_argument("--pair-shares", type=float, nargs="+", default=[0.625, 0.6875, 0.75, 0.8125, 0.875],
+                      help="shares of the hand's opening the surface's pairs may close on, to compare")  # fmt: skip
     show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
     args = parser.parse_args(argv)
     return collect(args) if args.command == "collect" else report(args)

@@ -363,7 +363,10 @@ class PlanningService:
                 kept = (
                     opposed_grasps(pairs.grasps, faces, session_hand, grid_cone) if faces is not None else []
                 )
-                checked, model = (replace(pairs, grasps=kept) if kept else pairs), "antipodal"
+                checked, model = (
+                    replace(pairs, grasps=self._narrow_first(kept or pairs.grasps, session_hand)),
+                    "antipodal",
+                )
             else:
                 checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
         grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
@@ -398,7 +401,8 @@ class PlanningService:
         answers: the VGN grasps whose pads meet opposed faces of the grid's surface (``faces``); the
         surface's antipodal pairs that pass every check and meet opposed faces of the grid's surface
         too; the VGN grasps whose pads meet opposed faces of the fine cloud; the other checked pairs;
-        the VGN grasps as they were. Returns the grasps and the model that answers."""
+        the VGN grasps as they were. Pairs answer narrow ones first (``_narrow_first``). Returns the
+        grasps and the model that answers."""
         grid_cone = math.radians(self.settings.antipodal_check_grid_angle)
         kept = opposed_grasps(checked.grasps, faces, hand, grid_cone)
         if kept:
@@ -406,12 +410,20 @@ class PlanningService:
         pairs = checked_of(plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(query), hand))
         kept = opposed_grasps(pairs.grasps, faces, hand, grid_cone)
         if kept:
-            return replace(pairs, grasps=kept), "antipodal"
+            return replace(pairs, grasps=self._narrow_first(kept, hand)), "antipodal"
         fine_cone = math.radians(self.settings.antipodal_check_angle)
         kept = opposed_grasps(checked.grasps, fine_cloud(), hand, fine_cone)
         if kept:
             return replace(checked, grasps=kept), model
-        return (pairs, "antipodal") if pairs.grasps else (checked, model)
+        if pairs.grasps:
+            return replace(pairs, grasps=self._narrow_first(pairs.grasps, hand)), "antipodal"
+        return checked, model
+
+    def _narrow_first(self, pairs: list[Grasp], hand: GripperDescription) -> list[Grasp]:
+        """The surface's ``pairs`` that close on at most ``narrow_pair_share`` of the hand's opening,
+        where some do, else all of them: a pair that spans most of the opening slips more often."""
+        widest = self.settings.narrow_pair_share * hand.max_opening
+        return [pair for pair in pairs if pair.width <= widest] or pairs
 
     def network_for(self, frame_count: int, hand: GripperDescription) -> GraspPlanner:
         """The network for a volume fused from ``frame_count`` frames, planning for ``hand``: the

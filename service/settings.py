@@ -116,6 +116,14 @@ class Settings(BaseSettings):
         "to VGN_FALLBACK_THRESHOLD: the network's few confident locations on a shape it does not know can "
         "all fail a check while the surface still offers a grip",
     )
+    narrow_pair_share: float = Field(
+        default=0.75,
+        gt=0.0,
+        le=1.0,
+        description="when the surface's antipodal pairs answer (the antipodal check's or the fallback's), "
+        "only those that close on at most this share of the hand's opening, where some do: a pair that "
+        "spans most of the opening slips several times as often in simulation (docs/concepts.md)",
+    )
     antipodal_check: bool = Field(
         default=True,
         description="where the grip check runs, keep only the checked VGN grasps whose fingers close "

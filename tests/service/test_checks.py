@@ -246,10 +246,11 @@ def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cl
     """The network's grasps on the box, turned 45 degrees about their approach, close on its edges (those
     whose pads still meet opposed faces aside): their pads meet no opposed faces of the grid's surface within 35 degrees, though a fine-cloud cone of 89
     degrees would keep them. The surface's pairs whose pads meet the grid's opposed faces come before
-    that verdict: they answer, each passing every check and opposed on the grid."""
-    service = PlanningService.from_settings(
-        Settings(model=PACKAGED_MODEL, api_key=None, antipodal_check_angle=89.0)
+    that verdict: they answer, each passing every check and opposed on the grid, the narrow ones only."""
+    settings = Settings(
+        model=PACKAGED_MODEL, api_key=None, antipodal_check_angle=89.0, narrow_pair_share=0.85
     )
+    service = PlanningService.from_settings(settings)
     try:
         session = fused_session(service)
         plain = service.plan(session, GraspQuery(threshold=0.5, clearance=False, grip=False)).grasps
@@ -273,11 +274,18 @@ def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cl
         unchecked = Checked(turned, clearance_dropped=0, grip_dropped=0, replaced=0)
         answer, model = service._opposed(unchecked, "vgn", faces, lambda: cloud, default_gripper(), checked_of,
                                          GraspQuery(), np.eye(4))  # fmt: skip
+        pairs = checked_of(service.plan(session, GraspQuery(planner="antipodal", clearance=False, grip=False,
+                                                            max_grasps=None)).grasps).grasps  # fmt: skip
     finally:
         service.close()
     assert model == "antipodal" and answer.grasps
     assert opposed(answer.grasps, faces, 35.0).all()
     assert checked_of(answer.grasps).grasps == answer.grasps  # each passes both checks as it is offered
+    # Of the pairs opposed on the grid (across the box's 6 cm side, turned: 6.3 cm and more), the ones
+    # that close on at most the given share of the 8 cm opening.
+    widest = settings.narrow_pair_share * default_gripper().max_opening
+    on_grid = [g for g, keep in zip(pairs, opposed(pairs, faces, 35.0), strict=True) if keep]
+    assert answer.grasps == [g for g in on_grid if g.width <= widest] != on_grid
 
 
 def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():
