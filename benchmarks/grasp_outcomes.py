@@ -343,6 +343,15 @@ def pairs_report(
     for share, values in narrow.items():
         per_look = [v for v in values if not np.isnan(v)]
         print(f"{share:20.3f} | {_percent(per_look):>18} | {_paired(second, np.array(values), repeats)}")
+    share = Settings.model_fields["narrow_pair_share"].default
+    widths = np.concatenate([look["pairs"][:, 7] for look in looks])
+    outcomes = np.concatenate([look["pair_outcomes"] for look in looks])
+    print(f"\nevery executed pair, by whether it closes on at most {share:.2f} of the opening:")
+    print("pairs | executed | success % | slipped %")
+    for label, group in (("narrow", widths <= share * max_opening), ("wide", widths > share * max_opening)):
+        held = outcomes[group] == success
+        slipped = outcomes[group] == OUTCOMES.index(Outcome.SLIPPED)
+        print(f"{label} | {group.sum()} | {_percent(list(held))} | {_percent(list(slipped))}")
 
 
 def _paired(first: np.ndarray, second: np.ndarray, repeats: int) -> str:

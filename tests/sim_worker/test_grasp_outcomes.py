@@ -69,3 +69,9 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     orders = report.split("a random grasp of each look's answer:")[1].splitlines()[2:4]
     assert len({line.split("|")[1] for line in orders}) == 1, report
     assert "second minus first, paired over" in report
+    # Narrowing the pairs to each share of the opening, then every executed pair split at the default share.
+    shares = report.split("share of the opening |")[1].split("\n\n")[0].splitlines()[1:]
+    assert len(shares) == 5, report
+    split = report.split("pairs | executed | success % | slipped %")[1].strip().splitlines()
+    executed = sum(len(look["pair_outcomes"]) for look in looks)
+    assert sum(int(line.split("|")[1]) for line in split) == 2 * executed  # the folder twice
