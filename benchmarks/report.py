@@ -245,7 +245,11 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                      "frames) do, under depth noise and on clean depth, with the grid's faces judged first? (Runs "
                      "that newer results replace in the README's table.)"),
     ("grid-pairs-", "What does answering with the surface's pairs whose pads meet opposed faces of the grid, before "
-                    "the fine cloud's verdict on the network's grasps, do to the default request?"),
+                    "the fine cloud's verdict on the network's grasps, do to the default request? (Runs that newer "
+                    "results replace in the README's table.)"),
+    ("narrow-pairs-", "What does answering with the narrow ones of the surface's pairs (those that close on at most "
+                      "three quarters of the hand's opening, where some do), after the grid's opposed pairs came first, "
+                      "do to the default request?"),
     ("seed-2-", "Does a second seed (another draw of scenes, the same command) agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
                        "do to the default request? (Runs that newer results replace in the README's table.)"),
