@@ -359,14 +359,9 @@ class PlanningService:
                 )
             if pairs is not None and pairs.grasps:
                 # Those whose pads meet opposed faces of the grid's surface too, where there are some.
-                grid_cone = math.radians(self.settings.antipodal_check_grid_angle)
-                kept = (
-                    opposed_grasps(pairs.grasps, faces, session_hand, grid_cone) if faces is not None else []
-                )
-                checked, model = (
-                    replace(pairs, grasps=self._narrow_first(kept or pairs.grasps, session_hand)),
-                    "antipodal",
-                )
+                kept = self._opposed_on_grid(pairs.grasps, faces, session_hand) if faces is not None else []
+                narrow = self._narrow_first(kept or pairs.grasps, session_hand)
+                checked, model = replace(pairs, grasps=narrow), "antipodal"
             else:
                 checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
         grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
@@ -403,12 +398,11 @@ class PlanningService:
         too; the VGN grasps whose pads meet opposed faces of the fine cloud; the other checked pairs;
         the VGN grasps as they were. Pairs answer narrow ones first (``_narrow_first``). Returns the
         grasps and the model that answers."""
-        grid_cone = math.radians(self.settings.antipodal_check_grid_angle)
-        kept = opposed_grasps(checked.grasps, faces, hand, grid_cone)
+        kept = self._opposed_on_grid(checked.grasps, faces, hand)
         if kept:
             return replace(checked, grasps=kept), model
         pairs = checked_of(plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(query), hand))
-        kept = opposed_grasps(pairs.grasps, faces, hand, grid_cone)
+        kept = self._opposed_on_grid(pairs.grasps, faces, hand)
         if kept:
             return replace(pairs, grasps=self._narrow_first(kept, hand)), "antipodal"
         fine_cone = math.radians(self.settings.antipodal_check_angle)
@@ -418,6 +412,12 @@ class PlanningService:
         if pairs.grasps:
             return replace(pairs, grasps=self._narrow_first(pairs.grasps, hand)), "antipodal"
         return checked, model
+
+    def _opposed_on_grid(
+        self, grasps: list[Grasp], faces: np.ndarray, hand: GripperDescription
+    ) -> list[Grasp]:
+        """The ``grasps`` whose pads meet opposed faces of the grid's surface (``faces``) within its cone."""
+        return opposed_grasps(grasps, faces, hand, math.radians(self.settings.antipodal_check_grid_angle))
 
     def _narrow_first(self, pairs: list[Grasp], hand: GripperDescription) -> list[Grasp]:
         """The surface's ``pairs`` that close on at most ``narrow_pair_share`` of the hand's opening,

@@ -134,7 +134,8 @@ def test_before_the_lower_threshold_the_surfaces_antipodal_pairs_are_checked_and
     """A low slab (10 x 6 x 2.5 cm): the packaged model offers nothing at its operating threshold and a
     few grasps below it, while the slab's sides make antipodal pairs that pass the clearance check.
     The pairs come first (in simulation they held more often than the network's grasps below its
-    threshold), those whose pads meet opposed faces of the grid's surface where some do; without them the network's lower-threshold grasps answer."""
+    threshold), those whose pads meet opposed faces of the grid's surface where some do; without them
+    the network's lower-threshold grasps answer."""
     settings = Settings(model=PACKAGED_MODEL, api_key=None, surface_fallback=surface_fallback)
     service = PlanningService.from_settings(settings)
     try:
@@ -244,8 +245,8 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
 
 def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cloud_is_asked():
     """The network's grasps on the box, turned 45 degrees about their approach, close on its edges (those
-    whose pads still meet opposed faces aside): their pads meet no opposed faces of the grid's surface within 35 degrees, though a fine-cloud cone of 89
-    degrees would keep them. The surface's pairs whose pads meet the grid's opposed faces come before
+    whose pads still meet opposed faces aside): their pads meet no opposed faces of the grid's surface
+    within 35 degrees, though a fine-cloud cone of 89 degrees would keep them. The surface's pairs whose pads meet the grid's opposed faces come before
     that verdict: they answer, each passing every check and opposed on the grid, the narrow ones only."""
     settings = Settings(
         model=PACKAGED_MODEL, api_key=None, antipodal_check_angle=89.0, narrow_pair_share=0.85
