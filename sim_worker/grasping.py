@@ -15,8 +15,6 @@ from sim_worker.world import World
 LIFT_DISTANCE = 0.10  # m
 #: Beyond this angle from straight down, lifting goes along world z instead of back along the approach.
 STEEP_APPROACH = np.pi / 3
-#: A grasp holds something when the fingers stay apart by more than this fraction of the max opening.
-HELD_OPENING_FRACTION = 0.1
 
 
 class Outcome(str, Enum):
@@ -139,7 +137,7 @@ def execute_grasp(
             return finish(Outcome.APPROACH_COLLISION, gripper.spec.max_opening)
         if on_contact is not None and on_contact():
             return finish(Outcome.INTERRUPTED, gripper.opening())
-    empty = HELD_OPENING_FRACTION * gripper.spec.max_opening
+    empty = gripper.spec.hand.held_opening
     gripper.close(stop_when_empty=empty if fast else None)
     closed_on_something = gripper.opening() > empty and bool(
         gripper.bodies_between_fingers() & set(world.objects)

@@ -28,6 +28,9 @@ NAME_PATTERN = r"^[a-z0-9][a-z0-9._-]{0,63}$"
 #: How far a stated coincidence (the pad's tip at the finger depth, its inner face on the
 #: closing plane) may be off, in metres: rounding in a hand-written file, not a design choice.
 TOLERANCE = 1e-6
+#: A closed hand whose pads stay at most this share of its opening apart holds nothing: VGN's
+#: success test, shared by the training labels and the benchmark.
+HELD_OPENING_FRACTION = 0.1
 
 Triple = tuple[float, float, float]
 
@@ -172,6 +175,11 @@ class GripperDescription(_Part):
     def max_opening(self) -> float:
         """The fully open width (m): the opening the hand approaches with."""
         return self.opening.max
+
+    @property
+    def held_opening(self) -> float:
+        """The opening (m) at or below which the closed hand counts as holding nothing."""
+        return HELD_OPENING_FRACTION * self.opening.max
 
     @property
     def pad_box(self) -> FingerBox:

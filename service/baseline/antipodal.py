@@ -36,7 +36,8 @@ if TYPE_CHECKING:
 # 3. For each of a few depths (fingertips 5–45 mm past the seed along z) the points in the closing
 #    region (|x| <= half the pad's width, 0 <= z <= the finger depth, within the opening towards -y)
 #    are collected. With at least ``min_points`` of them, the closed width is their y-extent + 2 mm
-#    (reject above the maximum opening) and the hand is centred on them along y.
+#    (reject above the maximum opening, and where the y-extent is no more than the hand's held
+#    opening: the closed hand would count as holding nothing) and the hand is centred on them along y.
 # 4. Antipodal test: the points within 3 mm of each jaw that face it (n · y > 0 at the +y jaw, < 0 at
 #    the -y jaw: the far side of a thin wall faces away) must have a mean normal within
 #    ``friction_angle`` of the jaw's outward direction (+y, -y). The mean, not each point: on a
@@ -65,7 +66,8 @@ TABLE_CLEARANCE = 0.005
 @dataclass(frozen=True)
 class Jaws:
     """The hand as the baseline models it (m): opening, finger length along the approach, half the
-    finger width along x, the palm's half width along y and its height along z; ``near`` and ``reach``
+    finger width along x, the palm's half width along y and its height along z, the opening at which
+    it holds nothing; ``near`` and ``reach``
     are balls about a seed holding every point the fingers and the palm of a hand placed for that seed
     can touch."""
 
@@ -74,6 +76,7 @@ class Jaws:
     finger_half_width: float
     palm_half_y: float
     palm_depth: float
+    held_opening: float
 
     def near(self, depths: tuple[float, ...]) -> tuple[float, float]:
         """The fingers' neighbourhood of a seed for fingertips ``depths`` past it: a ball this far (m)
@@ -97,7 +100,12 @@ class Jaws:
 def jaws_of(hand: GripperDescription) -> Jaws:
     """The baseline's model of ``hand``: its opening, finger depth, pad width and palm."""
     return Jaws(
-        hand.max_opening, hand.finger_depth, hand.pad_box.half[0], hand.palm.half[1], hand.palm.size[2]
+        hand.max_opening,
+        hand.finger_depth,
+        hand.pad_box.half[0],
+        hand.palm.half[1],
+        hand.palm.size[2],
+        hand.held_opening,
     )
 
 
@@ -148,9 +156,14 @@ def plan_antipodal(
     rng = np.random.default_rng(config.random_seed)
     seeds = rng.choice(candidates, size=min(config.seeds, len(candidates)), replace=False)
     tree = cKDTree(points)
+    offset, radius = jaws.near(config.depths)
+    # One query for every seed's neighbourhood (the fingers' ball about it, step 3).
+    neighbourhoods = tree.query_ball_point(points[seeds] - offset * normals[seeds], radius)
     found = []  # (quality, position, rotation matrix, width)
-    for seed in seeds:
-        found.extend(_grasps_at_seed(points, normals, tree, seed, floor, config, jaws))
+    for seed, near in zip(seeds, neighbourhoods, strict=True):
+        found.extend(
+            _grasps_at_seed(points, normals, seed, np.asarray(near, dtype=np.intp), floor, config, jaws)
+        )
     if not found:
         return []
     quality = np.array([f[0] for f in found])
@@ -175,21 +188,29 @@ def plan_antipodal(
     ]
 
 
+def _gathered(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For an (A, S) ``mask``, (A, M) column indices of each row's true entries in their order, padded
+    to the longest row, and (A, M) which of them are real: every approach's slab as one array."""
+    counts = mask.sum(axis=1)
+    order = np.argsort(~mask, axis=1, kind="stable")[:, : max(int(counts.max()), 1)]
+    return order, np.arange(order.shape[1]) < counts[:, None]
+
+
 def _grasps_at_seed(
     points: np.ndarray,
     normals: np.ndarray,
-    tree: cKDTree,
     seed: int,
+    near: np.ndarray,
     floor: float,
     config: AntipodalConfig,
     jaws: Jaws,
 ) -> list[tuple[float, np.ndarray, np.ndarray, float]]:
-    """The best valid depth for each approach direction around one seed."""
+    """The best valid depth for each approach direction around one seed, every approach at once
+    (arrays (A, D, M): approaches, depths, the points of each approach's slab); ``near`` indexes the
+    points of the fingers' neighbourhood of the seed."""
     max_opening, finger_depth, finger_half_width = jaws.max_opening, jaws.finger_depth, jaws.finger_half_width
     origin, y = points[seed], normals[seed]
     cos_cone = math.cos(config.friction_angle)
-    offset, radius = jaws.near(config.depths)
-    near = np.asarray(tree.query_ball_point(origin - offset * y, radius), dtype=np.intp)
     rel = points[near] - origin
     py, ny = rel @ y, normals[near] @ y  # n · y is the same for every approach
     opposite = (ny <= -cos_cone) & (py >= -max_opening) & (py <= 0.0)
@@ -198,65 +219,71 @@ def _grasps_at_seed(
     down = np.array([0.0, 0.0, -1.0])
     a0 = down - (down @ y) * y
     if np.linalg.norm(a0) < 1e-6:  # a vertical normal: any perpendicular will do
-        a0 = np.cross(y, [1.0, 0.0, 0.0])
+        a0 = _cross(y, np.array([1.0, 0.0, 0.0]))
     a0 /= np.linalg.norm(a0)
-    v = np.cross(y, a0)
+    v = _cross(y, a0)
+    near_normals = normals[near]
     pu, pv = rel @ a0, rel @ v
-    nu, nv = normals[near] @ a0, normals[near] @ v
-    far = None  # the palm's (larger) neighbourhood, computed only when needed
+    nu, nv = near_normals @ a0, near_normals @ v
+    angles = np.arange(config.approaches) * (2 * np.pi / config.approaches)
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]  # (A, 1)
+    slab, real = _gathered(np.abs(c * pv - s * pu) <= finger_half_width)  # x = y × z, z = c a0 + s v
+    pz = np.take_along_axis(c * pu + s * pv, slab, axis=1)[:, None, :]  # (A, 1, M)
+    qy, qn, qa, qv = (values[slab][:, None, :] for values in (py, ny, nu, nv))
     tips = np.asarray(config.depths)[:, None]  # (D, 1) fingertip offset past the seed along z
+    along = (pz <= tips) & (pz >= tips - finger_depth) & real[:, None, :]  # between finger bases and tips
+    closing = along & (qy >= -max_opening - WIDTH_MARGIN) & (qy <= WIDTH_MARGIN / 2)
+    count = closing.sum(axis=2)
+    y_max = np.where(closing, qy, -np.inf).max(axis=2)
+    y_min = np.where(closing, qy, np.inf).min(axis=2)
+    width = y_max - y_min + WIDTH_MARGIN
+    valid = (count >= config.min_points) & (width <= max_opening) & (width - WIDTH_MARGIN > jaws.held_opening)
+    if not valid.any():
+        return []
+    centre = np.where(valid, (y_max + y_min) / 2, 0.0)
+    half = np.where(valid, width / 2, 0.0)
+    # The cheap tests first: fingers clear of the points, then above the table; then the antipodal test.
+    offset = np.abs(qy - centre[..., None])
+    fingers = along & (offset >= half[..., None]) & (offset <= half[..., None] + FINGER_THICKNESS)
+    valid &= ~fingers.any(axis=2)
+    z_axes = c * a0 + s * v  # (A, 3)
+    x_axes = c * v - s * a0  # y × z
+    valid &= _lowest_z(origin, x_axes, y, z_axes, centre, half, tips[:, 0], jaws) >= floor
+    if not valid.any():
+        return []
+    hi_jaw = closing & (qy >= y_max[..., None] - JAW_TOLERANCE) & (qn > 0.0)
+    lo_jaw = closing & (qy <= y_min[..., None] + JAW_TOLERANCE) & (qn < 0.0)
+    hi_n, lo_n = np.maximum(hi_jaw.sum(axis=2), 1), np.maximum(lo_jaw.sum(axis=2), 1)
+    valid &= _mean_normal_cosine(hi_jaw, qn, qa, qv) >= cos_cone
+    valid &= _mean_normal_cosine(lo_jaw, -qn, qa, qv) >= cos_cone
+    if not valid.any():
+        return []
+    # The palm's (larger) neighbourhood, for the approaches still valid.
+    live = np.flatnonzero(valid.any(axis=1))
+    far_rel = points - origin  # the ball spans most of a workspace: a mask beats a tree query
+    far_rel = far_rel[np.einsum("ij,ij->i", far_rel, far_rel) <= jaws.reach**2]
+    fu, fy, fv = far_rel @ a0, far_rel @ y, far_rel @ v
+    in_x, in_real = _gathered(np.abs(c[live] * fv - s[live] * fu) <= PALM_HALF_X)
+    fz = np.take_along_axis(c[live] * fu + s[live] * fv, in_x, axis=1)[:, None, :]
+    base = tips - finger_depth
+    palm = (
+        (fz < base)
+        & (fz >= base - jaws.palm_depth)
+        & (np.abs(fy[in_x][:, None, :] - centre[live][..., None]) <= jaws.palm_half_y)
+        & in_real[:, None, :]
+    )
+    valid[live] &= ~palm.any(axis=2)
     results = []
-    for angle in np.arange(config.approaches) * (2 * np.pi / config.approaches):
-        c, s = math.cos(angle), math.sin(angle)
-        px_all = c * pv - s * pu  # x = y × z with z = c a0 + s v
-        slab = np.abs(px_all) <= finger_half_width
-        pz, qy, qn = (c * pu + s * pv)[slab], py[slab], ny[slab]
-        qa, qv = nu[slab], nv[slab]
-        along = (pz <= tips) & (pz >= tips - finger_depth)  # (D, S) between finger bases and tips
-        closing = along & (qy >= -max_opening - WIDTH_MARGIN) & (qy <= WIDTH_MARGIN / 2)
-        count = closing.sum(axis=1)
-        y_max = np.where(closing, qy, -np.inf).max(axis=1)
-        y_min = np.where(closing, qy, np.inf).min(axis=1)
-        width = y_max - y_min + WIDTH_MARGIN
-        valid = (count >= config.min_points) & (width <= max_opening)
-        if not valid.any():
-            continue
-        centre = np.where(valid, (y_max + y_min) / 2, 0.0)
-        half = np.where(valid, width / 2, 0.0)
-        hi_jaw = closing & (qy >= y_max[:, None] - JAW_TOLERANCE) & (qn > 0.0)
-        lo_jaw = closing & (qy <= y_min[:, None] + JAW_TOLERANCE) & (qn < 0.0)
-        hi_n, lo_n = np.maximum(hi_jaw.sum(axis=1), 1), np.maximum(lo_jaw.sum(axis=1), 1)
-        valid &= _mean_normal_cosine(hi_jaw, qn, qa, qv) >= cos_cone
-        valid &= _mean_normal_cosine(lo_jaw, -qn, qa, qv) >= cos_cone
-        offset = np.abs(qy - centre[:, None])
-        fingers = along & (offset >= half[:, None]) & (offset <= half[:, None] + FINGER_THICKNESS)
-        valid &= ~fingers.any(axis=1)
-        z_axis = c * a0 + s * v
-        x_axis = np.cross(y, z_axis)
-        valid &= _lowest_z(origin, x_axis, y, z_axis, centre, half, tips[:, 0], jaws) >= floor
-        if not valid.any():
-            continue
-        if far is None:
-            far_rel = points[np.asarray(tree.query_ball_point(origin, jaws.reach), dtype=np.intp)] - origin
-            far = far_rel @ a0, far_rel @ y, far_rel @ v
-        fu, fy, fv = far
-        in_x = np.abs(c * fv - s * fu) <= PALM_HALF_X
-        fz, fy = (c * fu + s * fv)[in_x], fy[in_x]
-        base = tips - finger_depth
-        palm = (
-            (fz < base) & (fz >= base - jaws.palm_depth) & (np.abs(fy - centre[:, None]) <= jaws.palm_half_y)
-        )
-        valid &= ~palm.any(axis=1)
-        if not valid.any():
-            continue
-        d = np.flatnonzero(valid)[-1]  # the deepest valid placement
+    for a in np.flatnonzero(valid.any(axis=1)):
+        d = np.flatnonzero(valid[a])[-1]  # the deepest valid placement
+        normal_y = np.abs(qn[a, 0])
         antipodality = 0.5 * (
-            (hi_jaw[d] * np.abs(qn)).sum() / hi_n[d] + (lo_jaw[d] * np.abs(qn)).sum() / lo_n[d]
+            (hi_jaw[a, d] * normal_y).sum() / hi_n[a, d] + (lo_jaw[a, d] * normal_y).sum() / lo_n[a, d]
         )
-        position = origin + centre[d] * y + (tips[d, 0] - finger_depth) * z_axis
-        downness = max(0.0, -z_axis[2])
-        quality = antipodality * (1 - 0.05 * width[d] / max_opening) * (0.9 + 0.1 * downness)
-        results.append((quality, position, np.column_stack([x_axis, y, z_axis]), width[d]))
+        position = origin + centre[a, d] * y + (tips[d, 0] - finger_depth) * z_axes[a]
+        downness = max(0.0, -z_axes[a, 2])
+        quality = antipodality * (1 - 0.05 * width[a, d] / max_opening) * (0.9 + 0.1 * downness)
+        results.append((quality, position, np.column_stack([x_axes[a], y, z_axes[a]]), width[a, d]))
     return results
 
 
@@ -310,12 +337,17 @@ def grips_antipodally(
     return result
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a × b`` for two 3-vectors: ``np.cross`` costs more than the rest of a seed's set-up."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _mean_normal_cosine(jaw: np.ndarray, ny: np.ndarray, nu: np.ndarray, nv: np.ndarray) -> np.ndarray:
     """Per depth, the cosine between the mean normal of the ``jaw`` points and +y (``ny``, ``nu``,
     ``nv``: the normals' components along y and two axes across it): a curved face's tilts about
     the contact cancel, a slanted face's do not."""
-    count = np.maximum(jaw.sum(axis=1), 1)
-    my, mu, mv = ((jaw * n).sum(axis=1) / count for n in (ny, nu, nv))
+    count = np.maximum(jaw.sum(axis=-1), 1)
+    my, mu, mv = ((jaw * n).sum(axis=-1) / count for n in (ny, nu, nv))
     return my / np.maximum(np.sqrt(my**2 + mu**2 + mv**2), 1e-12)
 
 
@@ -329,8 +361,10 @@ def _lowest_z(
     tips: np.ndarray,
     jaws: Jaws,
 ) -> np.ndarray:
-    """World z of the lowest corner of the fingers and palm, per depth (all arrays (D,))."""
+    """World z of the lowest corner of the fingers and palm, per approach and depth: the axes (3,) or
+    (A, 3), ``centre`` and ``half`` (D,) or (A, D), ``tips`` (D,)."""
     finger_half_width, palm_half_y = jaws.finger_half_width, jaws.palm_half_y
+    x_z, y_z, z_z = x_axis[..., 2:3], y_axis[..., 2:3], z_axis[..., 2:3]  # their world z, broadcast over D
 
     def box_min(
         x_lo: float | np.ndarray,
@@ -341,9 +375,9 @@ def _lowest_z(
         z_hi: float | np.ndarray,
     ) -> np.ndarray:
         return (
-            np.minimum(x_lo * x_axis[2], x_hi * x_axis[2])
-            + np.minimum(y_lo * y_axis[2], y_hi * y_axis[2])
-            + np.minimum(z_lo * z_axis[2], z_hi * z_axis[2])
+            np.minimum(x_lo * x_z, x_hi * x_z)
+            + np.minimum(y_lo * y_z, y_hi * y_z)
+            + np.minimum(z_lo * z_z, z_hi * z_z)
         )
 
     base = tips - jaws.finger_depth

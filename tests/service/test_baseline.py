@@ -137,3 +137,28 @@ def test_another_planners_grasp_is_judged_by_the_faces_its_pads_meet(core):
     ]
     wide = grips_antipodally(cloud, positions[1:2], rotations[1:2], default_gripper(), np.radians(50.0))
     assert wide.tolist() == [True]
+
+
+def plate_cloud(thickness: float) -> np.ndarray:
+    """(M, 6) points and outward normals of an upright 8 x ``thickness`` x 6 cm plate standing on a
+    table patch (world frame, the table at z = 0, 2 mm spacing)."""
+    step = 0.002
+    xs, zs = np.arange(-0.04, 0.0401, step), np.arange(0.0, 0.0601, step)
+    x, z = (a.ravel() for a in np.meshgrid(xs, zs))
+    faces = [np.column_stack([x, np.full_like(x, side * thickness / 2), z]) for side in (-1, 1)]
+    normals = [np.tile([0.0, side, 0.0], (len(x), 1)) for side in (-1, 1)]
+    tx, ty = (a.ravel() for a in np.meshgrid(np.arange(-0.1, 0.1001, step), np.arange(-0.1, 0.1001, step)))
+    table = np.abs(ty) > thickness / 2 + step
+    faces.append(np.column_stack([tx[table], ty[table], np.zeros(table.sum())]))
+    normals.append(np.tile([0.0, 0.0, 1.0], (table.sum(), 1)))
+    return np.column_stack([np.concatenate(faces), np.concatenate(normals)])
+
+
+def test_no_pair_closes_on_less_than_the_hand_holds():
+    """A plate thinner than the hand's held opening (the success test's 10 % of the opening) is no
+    grasp: the closed fingers would read as holding nothing. A thicker one is gripped across."""
+    hand = default_gripper()
+    thin, thick = 0.75 * hand.held_opening, 2.0 * hand.held_opening
+    assert plan_antipodal(plate_cloud(thin), np.eye(4), AntipodalConfig(), hand) == []
+    across = plan_antipodal(plate_cloud(thick), np.eye(4), AntipodalConfig(), hand)
+    assert across and all(g.width == pytest.approx(thick + 0.002, abs=1e-6) for g in across)
