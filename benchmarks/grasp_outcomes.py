@@ -284,13 +284,21 @@ def antipodal_report(
 
 
 #: The antipodal check's answers in turn, the first that is not empty answering (``pairs_report``):
-#: where some network grasp passes the clearance and grip checks, and where none does (the fallback).
+#: where some network grasp passes the clearance and grip checks, and where none does (the fallback);
+#: and whether answering pairs are narrowed (``VGN_NARROW_PAIR_SHARE``). The first is the service's.
 TIER_ORDERS = {
-    "the fine cloud before the pairs": (("grid", "cloud", "pairs", "checked"), ("every pair", "lower")),
-    "the grid's opposed pairs first": (
+    "the service's order": (
         ("grid", "grid pairs", "cloud", "pairs", "checked"),
         ("every grid pair", "every pair", "lower"),
+        True,
     ),
+    "the fine cloud before the pairs": (("grid", "cloud", "pairs", "checked"), ("every pair", "lower"), True),
+    "the checked pairs before the network's grasps": (
+        ("grid pairs", "grid", "cloud", "pairs", "checked"),
+        ("every grid pair", "every pair", "lower"),
+        True,
+    ),
+    "the antipodal baseline: its checked pairs alone": (("pairs",), ("pairs",), False),
 }
 
 
@@ -299,59 +307,73 @@ def pairs_report(
 ) -> None:
     """Print how often a random grasp of each look's answer succeeds under each order of the antipodal
     check's answers (``TIER_ORDERS``), from the executed network grasps and surface pairs of a
-    ``collect --pairs`` run, and the paired difference over the looks with a bootstrap interval; then
-    the same for the last order with its pairs narrowed to each of ``shares`` of the hand's opening."""
+    ``collect --pairs`` run, each against the service's order paired over the looks both answer, with a
+    bootstrap interval; then the service's order with its pairs narrowed to each of ``shares`` of the
+    hand's opening against none narrowed, and every executed pair split by width."""
     success = OUTCOMES.index(Outcome.SUCCESS)
     grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
                             for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
+    share = Settings.model_fields["narrow_pair_share"].default
+    max_opening = default_gripper().max_opening
     per_order: dict[str, list[float]] = {name: [] for name in TIER_ORDERS}
     answered_by: dict[str, dict[str, int]] = {name: {} for name in TIER_ORDERS}
-    narrow: dict[float, list[float]] = {share: [] for share in shares}
-    max_opening = default_gripper().max_opening
+    narrow: dict[float | None, list[float]] = {limit: [] for limit in [None, *shares]}
     for look in looks:
         answers = _tier_answers(look, voxel_size, grid_cone, fine_cone)
         held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
-        tiers = {}
-        for name, (checked, fallback) in TIER_ORDERS.items():
+
+        for name, (checked, fallback, narrowed) in TIER_ORDERS.items():
             order = checked if len(answers["checked"][1]) else fallback
-            tier = tiers[name] = next((tier for tier in order if len(held[tier])), None)
-            per_order[name].append(float(np.mean(held[tier])) if tier else np.nan)
+            tier, value = _answer(look, answers, held, order, share if narrowed else None)
+            per_order[name].append(value)
             answered_by[name][tier or "nothing"] = answered_by[name].get(tier or "nothing", 0) + 1
-        # The last order's answer again, its pairs narrowed to those within each share of the opening.
-        tier = tiers[list(TIER_ORDERS)[-1]]
-        for share in shares:
-            if tier is None:
-                narrow[share].append(np.nan)
-                continue
-            source, rows = answers[tier]
-            kept = held[tier]
-            if source == "pair_outcomes":
-                within = look["pairs"][rows, 7] <= share * max_opening
-                kept = kept[within] if within.any() else kept
-            narrow[share].append(float(np.mean(kept)))
+        checked, fallback, _ = next(iter(TIER_ORDERS.values()))
+        for limit in narrow:
+            order = checked if len(answers["checked"][1]) else fallback
+            narrow[limit].append(_answer(look, answers, held, order, limit)[1])
     print(f"{len(looks)} looks with the surface's pairs executed; a random grasp of each look's answer:")
-    print("order | looks answered | success % per look | answered by")
-    for name, values in per_order.items():
+    print("order | looks answered | success % per look | answered by | against the service's order")
+    reference = np.array(next(iter(per_order.values())))
+    for index, (name, values) in enumerate(per_order.items()):
         answered = [v for v in values if not np.isnan(v)]
         tiers = ", ".join(f"{tier} {count}" for tier, count in answered_by[name].items())
-        print(f"{name} | {len(answered)} | {_percent(answered)} | {tiers}")
-    first, second = (np.array(v) for v in per_order.values())
-    print(f"second minus first, {_paired(first, second, repeats)}")
-    print(f"\nthe last order, its pairs narrowed to those that close on at most a share of the {max_opening * 100:.0f} "
-          "cm opening where some do; against all of its pairs:")  # fmt: skip
+        against = _paired(reference, np.array(values), repeats) if index else "-"
+        print(f"{name} | {len(answered)} | {_percent(answered)} | {tiers} | {against}")
+    print(f"\nthe service's order, its pairs narrowed to those that close on at most a share of the "
+          f"{max_opening * 100:.0f} cm opening where some do; against none narrowed:")  # fmt: skip
     print("share of the opening | success % per look | paired difference")
-    for share, values in narrow.items():
+    unnarrowed = np.array(narrow.pop(None))
+    for limit, values in narrow.items():
         per_look = [v for v in values if not np.isnan(v)]
-        print(f"{share:20.3f} | {_percent(per_look):>18} | {_paired(second, np.array(values), repeats)}")
-    share = Settings.model_fields["narrow_pair_share"].default
+        print(f"{limit:20.3f} | {_percent(per_look):>18} | {_paired(unnarrowed, np.array(values), repeats)}")
     widths = np.concatenate([look["pairs"][:, 7] for look in looks])
     outcomes = np.concatenate([look["pair_outcomes"] for look in looks])
     print(f"\nevery executed pair, by whether it closes on at most {share:.2f} of the opening:")
     print("pairs | executed | success % | slipped %")
     for label, group in (("narrow", widths <= share * max_opening), ("wide", widths > share * max_opening)):
-        held = outcomes[group] == success
+        held_pairs = outcomes[group] == success
         slipped = outcomes[group] == OUTCOMES.index(Outcome.SLIPPED)
-        print(f"{label} | {group.sum()} | {_percent(list(held))} | {_percent(list(slipped))}")
+        print(f"{label} | {group.sum()} | {_percent(list(held_pairs))} | {_percent(list(slipped))}")
+
+
+def _answer(
+    look: dict[str, np.ndarray],
+    answers: dict[str, tuple[str, np.ndarray]],
+    held: dict[str, np.ndarray],
+    order: tuple[str, ...],
+    limit: float | None,
+) -> tuple[str | None, float]:
+    """The tier of ``order`` that answers a look and the success of a random grasp of it, its pairs
+    narrowed to those within ``limit`` of the hand's opening where some are (None: not narrowed)."""
+    tier = next((tier for tier in order if len(held[tier])), None)
+    if tier is None:
+        return None, np.nan
+    source, rows = answers[tier]
+    kept = held[tier]
+    if limit is not None and source == "pair_outcomes":
+        within = look["pairs"][rows, 7] <= limit * default_gripper().max_opening
+        kept = kept[within] if within.any() else kept
+    return tier, float(np.mean(kept))
 
 
 def _paired(first: np.ndarray, second: np.ndarray, repeats: int) -> str:

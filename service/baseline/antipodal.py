@@ -67,9 +67,8 @@ TABLE_CLEARANCE = 0.005
 class Jaws:
     """The hand as the baseline models it (m): opening, finger length along the approach, half the
     finger width along x, the palm's half width along y and its height along z, the opening at which
-    it holds nothing; ``near`` and ``reach``
-    are balls about a seed holding every point the fingers and the palm of a hand placed for that seed
-    can touch."""
+    it holds nothing; ``near`` and ``reach`` are balls about a seed holding every point the fingers and
+    the palm of a hand placed for that seed can touch."""
 
     max_opening: float
     finger_depth: float
@@ -98,7 +97,7 @@ class Jaws:
 
 
 def jaws_of(hand: GripperDescription) -> Jaws:
-    """The baseline's model of ``hand``: its opening, finger depth, pad width and palm."""
+    """The baseline's model of ``hand``: its opening, finger depth, pad width, palm and held opening."""
     return Jaws(
         hand.max_opening,
         hand.finger_depth,
@@ -211,8 +210,8 @@ def _grasps_at_seed(
     max_opening, finger_depth, finger_half_width = jaws.max_opening, jaws.finger_depth, jaws.finger_half_width
     origin, y = points[seed], normals[seed]
     cos_cone = math.cos(config.friction_angle)
-    rel = points[near] - origin
-    py, ny = rel @ y, normals[near] @ y  # n · y is the same for every approach
+    rel, near_normals = points[near] - origin, normals[near]
+    py, ny = rel @ y, near_normals @ y  # n · y is the same for every approach
     opposite = (ny <= -cos_cone) & (py >= -max_opening) & (py <= 0.0)
     if not opposite.any():  # nothing to close on: no antipodal grasp from this seed
         return []
@@ -222,7 +221,6 @@ def _grasps_at_seed(
         a0 = _cross(y, np.array([1.0, 0.0, 0.0]))
     a0 /= np.linalg.norm(a0)
     v = _cross(y, a0)
-    near_normals = normals[near]
     pu, pv = rel @ a0, rel @ v
     nu, nv = near_normals @ a0, near_normals @ v
     angles = np.arange(config.approaches) * (2 * np.pi / config.approaches)

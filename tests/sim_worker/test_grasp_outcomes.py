@@ -65,10 +65,13 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert len(totals) == 1, "every cone splits the same grasps"
     for table in rows:
         assert len(table) == 2 and int(table[0][1]) <= int(table[1][1])
-    # Both orders of the antipodal check's answers answer the same looks (they differ in what answers).
-    orders = report.split("a random grasp of each look's answer:")[1].splitlines()[2:4]
-    assert len({line.split("|")[1] for line in orders}) == 1, report
-    assert "second minus first, paired over" in report
+    # The network-first orders answer the same looks (they differ in what answers), each compared with
+    # the service's; the baseline answers only where a checked pair exists, so no more looks.
+    orders = report.split("a random grasp of each look's answer:")[1].split("\n\n")[0].splitlines()[2:]
+    assert len(orders) == 4, report
+    assert len({line.split("|")[1] for line in orders[:3]}) == 1, report
+    assert int(orders[3].split("|")[1]) <= int(orders[0].split("|")[1])
+    assert all("paired over" in line.split("|")[4] for line in orders[1:]), report
     # Narrowing the pairs to each share of the opening, then every executed pair split at the default share.
     shares = report.split("share of the opening |")[1].split("\n\n")[0].splitlines()[1:]
     assert len(shares) == 5, report
