@@ -249,7 +249,9 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                     "results replace in the README's table.)"),
     ("narrow-pairs-", "What does answering with the narrow ones of the surface's pairs (those that close on at most "
                       "three quarters of the hand's opening, where some do), after the grid's opposed pairs came first, "
-                      "do to the default request?"),
+                      "do to the default request? (Runs that newer results replace in the README's table.)"),
+    ("held-opening-", "What does offering no pair whose faces lie within the hand's held opening do to the default "
+                      "request, against the code before on the same machine (the before runs carry a variant.md)?"),
     ("seed-2-", "Does a second seed (another draw of scenes, the same command) agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
                        "do to the default request? (Runs that newer results replace in the README's table.)"),
