@@ -8,6 +8,7 @@ from fastapi.testclient import TestClient
 from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
+from service.baseline.antipodal import WIDTH_MARGIN
 from service.core import PlanningService
 from service.http_app import create_app
 from service.settings import Settings
@@ -161,4 +162,4 @@ def test_no_pair_closes_on_less_than_the_hand_holds():
     thin, thick = 0.75 * hand.held_opening, 2.0 * hand.held_opening
     assert plan_antipodal(plate_cloud(thin), np.eye(4), AntipodalConfig(), hand) == []
     across = plan_antipodal(plate_cloud(thick), np.eye(4), AntipodalConfig(), hand)
-    assert across and all(g.width == pytest.approx(thick + 0.002, abs=1e-6) for g in across)
+    assert across and all(g.width == pytest.approx(thick + WIDTH_MARGIN, abs=1e-6) for g in across)
