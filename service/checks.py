@@ -139,6 +139,28 @@ def passes_checks(
     return clear & _grip_passes(measure, len(positions), grip_config)
 
 
+def clear_of(
+    grasps: list[Grasp],
+    points: np.ndarray,
+    grid: np.ndarray | None,
+    voxel_size: float,
+    workspace_pose: np.ndarray,
+    workspace_size: float,
+) -> list[Grasp]:
+    """The ``grasps`` whose open hand's approach misses ``points`` (world frame), judged as
+    :func:`check_grasps` judges its surface: the support plane (found on ``grid``; None: none) may
+    meet the fingertips in the approach's last :data:`SUPPORT_CONTACT_TOLERANCE`. The surface's
+    antipodal pairs are cleared so against the fine cloud they were found on, whose 2.5 mm surface
+    shows what brushes past the fingers between the grid's 7.5 mm crossings."""
+    if not grasps:
+        return []
+    seen = _observed(np.asarray(points, dtype=np.float64).reshape(-1, 3), grid, voxel_size, workspace_pose,
+                     workspace_size)  # fmt: skip
+    positions = np.array([g.position for g in grasps], dtype=np.float64)
+    clear = _approach_clear(positions, np.array([g.orientation for g in grasps], dtype=np.float64), seen)
+    return [g for g, ok in zip(grasps, clear, strict=True) if ok]
+
+
 def _count(check_input: np.ndarray | None, dropped: int) -> int | None:
     return None if check_input is None else dropped
 

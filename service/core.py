@@ -16,8 +16,8 @@ from typing import TypeVar
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from service.baseline import grips_antipodally, plan_antipodal
-from service.checks import Checked, check_grasps
+from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
+from service.checks import Checked, check_grasps, clear_of
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
@@ -289,6 +289,8 @@ class PlanningService:
             grip = grip_on and session.frame_count >= MIN_GRIP_FRAMES
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
+            # The grid the support plane is found on, for clearing the surface's pairs.
+            support_grid = grid if grid is not None or not baseline else session.volume.grid()
             # The antipodal check refines the grip check where it runs: whether the pads meet opposed
             # faces (one frame shows one face of each object: no grip check then), on the grid's faces
             # first; the fine cloud is read only where those do not settle it.
@@ -305,9 +307,7 @@ class PlanningService:
         ranked = query.model_copy(update={"max_grasps": None}) if clearance or grip else query
         network = self.network_for(frame_count, session_hand)
         if baseline:
-            config = antipodal_config(ranked)
-            grasps, model = plan_antipodal(observed, workspace_pose, config, session_hand), "antipodal"
-            threshold = config.threshold
+            grasps, model, threshold = [], "antipodal", antipodal_config(ranked).threshold
         else:
             turn_average = self.settings.turn_average if query.turn_average is None else query.turn_average
             # One revision: one frame count and the session's one hand, so one network.
@@ -324,7 +324,7 @@ class PlanningService:
             return check_grasps(candidates, surface, grip_grid, voxel_size, workspace_pose, workspace_size,
                                 self.grip_config, self.settings.alternatives)  # fmt: skip
 
-        cloud: np.ndarray | None = None
+        cloud: np.ndarray | None = observed if baseline else None
 
         def fine_cloud() -> np.ndarray:
             nonlocal cloud
@@ -333,10 +333,23 @@ class PlanningService:
                     cloud = session.volume.cloud()
             return cloud
 
-        checked = checked_of(grasps)
+        def checked_pairs(config: AntipodalConfig, grip_grid: np.ndarray | None = grid) -> Checked:
+            # The surface's pairs, cleared against the fine cloud they were found on as well as the
+            # grid's surface: the grid's coarser surface misses what brushes past the fingers.
+            checked = checked_of(
+                plan_antipodal(fine_cloud(), workspace_pose, config, session_hand), grip_grid
+            )
+            if surface is None:
+                return checked
+            pairs = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
+                             workspace_size)  # fmt: skip
+            dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(pairs)
+            return replace(checked, grasps=pairs, clearance_dropped=dropped)
+
+        checked = checked_pairs(antipodal_config(ranked)) if baseline else checked_of(grasps)
         if faces is not None and checked.grasps:
             checked, model = self._opposed(
-                checked, model, faces, fine_cloud, session_hand, checked_of, ranked, workspace_pose
+                checked, model, faces, fine_cloud, session_hand, checked_pairs, ranked
             )
             if model == "antipodal":  # the surface's pairs answer, at the baseline's threshold
                 threshold = antipodal_config(ranked).threshold
@@ -354,9 +367,7 @@ class PlanningService:
             # the network's grasps below its threshold, where the surface offers none.
             pairs = None
             if self.settings.surface_fallback:
-                pairs = checked_of(
-                    plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(lower), session_hand), None
-                )
+                pairs = checked_pairs(antipodal_config(lower), None)
             if pairs is not None and pairs.grasps:
                 # Those whose pads meet opposed faces of the grid's surface too, where there are some.
                 kept = self._opposed_on_grid(pairs.grasps, faces, session_hand) if faces is not None else []
@@ -388,9 +399,8 @@ class PlanningService:
         faces: np.ndarray,
         fine_cloud: Callable[[], np.ndarray],
         hand: GripperDescription,
-        checked_of: Callable[[list[Grasp]], Checked],
+        checked_pairs: Callable[[AntipodalConfig], Checked],
         query: GraspQuery,
-        workspace_pose: np.ndarray,
     ) -> tuple[Checked, str]:
         """The antipodal check on checked VGN grasps. In turn, the first of these that is not empty
         answers: the VGN grasps whose pads meet opposed faces of the grid's surface (``faces``); the
@@ -401,7 +411,7 @@ class PlanningService:
         kept = self._opposed_on_grid(checked.grasps, faces, hand)
         if kept:
             return replace(checked, grasps=kept), model
-        pairs = checked_of(plan_antipodal(fine_cloud(), workspace_pose, antipodal_config(query), hand))
+        pairs = checked_pairs(antipodal_config(query))
         kept = self._opposed_on_grid(pairs.grasps, faces, hand)
         if kept:
             return replace(pairs, grasps=self._narrow_first(kept, hand)), "antipodal"

@@ -9,8 +9,10 @@ from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
 from service.baseline.antipodal import WIDTH_MARGIN
+from service.checks import check_grasps, clear_of
 from service.core import PlanningService
 from service.http_app import create_app
+from service.planner import antipodal_config
 from service.settings import Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, CylinderScene, circle_views
 from vgn_contract.gripper_description import default_gripper
@@ -163,3 +165,29 @@ def test_no_pair_closes_on_less_than_the_hand_holds():
     assert plan_antipodal(plate_cloud(thin), np.eye(4), AntipodalConfig(), hand) == []
     across = plan_antipodal(plate_cloud(thick), np.eye(4), AntipodalConfig(), hand)
     assert across and all(g.width == pytest.approx(thick + WIDTH_MARGIN, abs=1e-6) for g in across)
+
+
+def test_the_surfaces_pairs_clear_the_fine_cloud_they_were_found_on(core):
+    """The grid's 7.5 mm surface lets through a pair whose open fingers brush the box's 2.5 mm
+    surface on the way in: the service clears its pairs against the fine cloud as well."""
+    session_id = fused_session(core)
+    query = GraspQuery(planner="antipodal", threshold=0.0, max_grasps=None)
+    answer = core.plan(session_id, query)
+    cloud, grid = core.cloud(session_id), core.grid(session_id)
+    with core.sessions.use(session_id) as session:
+        surface, workspace, pose = (
+            session.volume.surface_points(),
+            session.workspace,
+            session.volume.workspace_pose,
+        )
+
+    def clear_of_cloud(grasps: list) -> list:
+        return clear_of(grasps, cloud[:, :3], grid, workspace.voxel_size, pose, workspace.size)
+
+    found = plan_antipodal(cloud, pose, antipodal_config(query), default_gripper())
+    on_grid = check_grasps(found, surface, grid, workspace.voxel_size, pose, workspace.size, core.grip_config,
+                           core.settings.alternatives).grasps  # fmt: skip
+    brushing = len(on_grid) - len(clear_of_cloud(on_grid))
+    assert brushing > 0  # the scene has such a pair
+    assert answer.grasps == clear_of_cloud(on_grid)
+    assert answer.clearance_dropped >= brushing

@@ -4,17 +4,19 @@ is kept in another pose that passes, and without alternatives the chain is the t
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from service.baseline import grips_antipodally
-from service.checks import SUPPORT_CONTACT_TOLERANCE, Checked, check_grasps, contact_tolerances
+from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
+from service.checks import SUPPORT_CONTACT_TOLERANCE, Checked, check_grasps, clear_of, contact_tolerances
 from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grid_surface import grid_surface_points
 from service.grip import GripConfig, gripping_grasps, support_height
+from service.planner import antipodal_config
 from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
@@ -272,11 +274,17 @@ def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cl
 
         turned = [g for g, keep in zip(turned, opposed(turned, faces, 35.0), strict=True) if not keep]
         assert turned and opposed(turned, cloud, 89.0).any()
+
+        def checked_pairs(config: AntipodalConfig) -> Checked:  # as the service clears the surface's pairs
+            checked = checked_of(plan_antipodal(cloud, np.eye(4), config, default_gripper()))
+            return replace(
+                checked, grasps=clear_of(checked.grasps, cloud[:, :3], grid, VOXEL, np.eye(4), SIZE)
+            )
+
         unchecked = Checked(turned, clearance_dropped=0, grip_dropped=0, replaced=0)
-        answer, model = service._opposed(unchecked, "vgn", faces, lambda: cloud, default_gripper(), checked_of,
-                                         GraspQuery(), np.eye(4))  # fmt: skip
-        pairs = checked_of(service.plan(session, GraspQuery(planner="antipodal", clearance=False, grip=False,
-                                                            max_grasps=None)).grasps).grasps  # fmt: skip
+        answer, model = service._opposed(unchecked, "vgn", faces, lambda: cloud, default_gripper(), checked_pairs,
+                                         GraspQuery())  # fmt: skip
+        pairs = checked_pairs(antipodal_config(GraspQuery())).grasps
     finally:
         service.close()
     assert model == "antipodal" and answer.grasps
