@@ -283,6 +283,8 @@ def antipodal_report(
         _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
 
 
+#: The suffix of an answer of pairs cleared on the grid's surface alone, not on the fine cloud as well.
+GRID_CLEARED = " (grid-cleared)"
 #: The antipodal check's answers in turn, the first that is not empty answering (``pairs_report``):
 #: where some network grasp passes the clearance and grip checks, and where none does (the fallback);
 #: and whether answering pairs are narrowed (``VGN_NARROW_PAIR_SHARE``). The first is the service's.
@@ -299,6 +301,11 @@ TIER_ORDERS = {
         True,
     ),
     "the antipodal baseline: its checked pairs alone": (("pairs",), ("pairs",), False),
+    "the pairs cleared on the grid's surface alone": (
+        ("grid", "grid pairs" + GRID_CLEARED, "cloud", "pairs" + GRID_CLEARED, "checked"),
+        ("every grid pair" + GRID_CLEARED, "every pair" + GRID_CLEARED, "lower"),
+        True,
+    ),
 }
 
 
@@ -393,7 +400,9 @@ def _tier_answers(
     pass both checks ("checked"), those opposed on the grid's faces ("grid") or the fine cloud
     ("cloud"); the pairs that pass the grip check ("pairs") and those opposed on the grid's faces
     ("grid pairs"); every clearance-checked pair ("every pair", "every grid pair"); and the network's
-    grasps that pass both checks down to the fallback floor ("lower")."""
+    grasps that pass both checks down to the fallback floor ("lower"). The service clears its pairs on the
+    fine cloud as well as the grid's surface (collected pairs are grid-cleared): each answer of pairs does
+    so too, and is also given as collected, :data:`GRID_CLEARED` appended to its key."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
 
@@ -413,14 +422,22 @@ def _tier_answers(
     checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)))
     gripping_pairs = gripping(pairs, np.arange(len(pairs)))
     every_pair = np.arange(len(pairs))
+    pair_answers = {
+        "pairs": gripping_pairs,
+        "grid pairs": opposed(pairs, gripping_pairs, faces, grid_cone),
+        "every pair": every_pair,
+        "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
+    }
+    cloud = look["cloud"][:, :3].astype(np.float64)
+    support = support_height(grid, voxel_size)
+    tolerance = None if support is None else contact_tolerances(cloud, np.eye(4), support, voxel_size)
+    clear = approach_is_clear(cloud, pairs[:, :3], pairs[:, 3:7], point_tolerance=tolerance)
     return {
         "checked": ("outcomes", checked),
         "grid": ("outcomes", opposed(grasps, checked, faces, grid_cone)),
         "cloud": ("outcomes", opposed(grasps, checked, look["cloud"], fine_cone)),
-        "pairs": ("pair_outcomes", gripping_pairs),
-        "grid pairs": ("pair_outcomes", opposed(pairs, gripping_pairs, faces, grid_cone)),
-        "every pair": ("pair_outcomes", every_pair),
-        "every grid pair": ("pair_outcomes", opposed(pairs, every_pair, faces, grid_cone)),
+        **{name: ("pair_outcomes", rows[clear[rows]]) for name, rows in pair_answers.items()},
+        **{name + GRID_CLEARED: ("pair_outcomes", rows) for name, rows in pair_answers.items()},
         "lower": ("outcomes", gripping(grasps, np.flatnonzero(grasps[:, 9] > 0))),
     }
 

@@ -40,7 +40,7 @@ class ClearanceConfig:
     closes only that much short of the grasp pose (often still a success, e.g. fingertips
     meeting the table). How the defaults were chosen: docs/concepts.md, "The clearance check"."""
 
-    margin: float = 0.002
+    margin: float = 0.004
     min_points: int = 2
     opening: float | None = None
     pregrasp_distance: float | None = None

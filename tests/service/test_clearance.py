@@ -102,10 +102,13 @@ def test_contact_in_the_last_millimetres_of_the_approach_is_tolerated():
     def table(depth: float) -> np.ndarray:  # the fingertips end ``depth`` below the plane
         return np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.05 - depth)])
 
+    into = DEFAULT.contact_tolerance - DEFAULT.margin - 0.0005  # the grown fingertips just within the tolerance
+    assert into > 0.0
     assert clear(table(-0.003))  # 3 mm short of the table
-    assert clear(table(0.002))  # 2 mm into it: with the 2 mm margin, within the 5 mm tolerance
+    assert clear(table(into))
+    assert not clear(table(into + 0.001))
     assert not clear(table(0.01))
-    assert not clear(table(0.002), config=ClearanceConfig(contact_tolerance=0.0))
+    assert not clear(table(into), config=ClearanceConfig(contact_tolerance=0.0))
 
 
 def test_the_verdict_does_not_depend_on_the_frame():
