@@ -18,8 +18,9 @@ several cones of the antipodal check (``--antipodal-angles``), the same for the 
 checks, judged by the faces their pads meet on the fine cloud. With ``collect --pairs N`` each look
 also executes up to N of the surface's antipodal pairs (the service's answer where the network's
 grasps fail the checks), and the report ends with how often a random grasp of each look's answer
-succeeds under each order of the antipodal check's answers (``TIER_ORDERS``). Choose settings on
-*training* objects; benchmark on held-out ones.
+succeeds under each order of the antipodal check's answers (``TIER_ORDERS``) and with the clearance
+check's hand grown by each of several margins. Choose settings on *training* objects; benchmark on
+held-out ones.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from scipy.spatial.transform import Rotation
 from client.connect import connect
 from service.baseline import grips_antipodally
 from service.checks import SUPPORT_CONTACT_TOLERANCE, contact_tolerances
-from service.clearance import approach_is_clear
+from service.clearance import ClearanceConfig, approach_is_clear
 from service.grid_surface import grid_surface_cloud, grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
 from service.launch.embedded import EmbeddedService
@@ -215,7 +216,10 @@ def report(args: argparse.Namespace) -> int:
     antipodal_report(looks, voxel_size, args.grid_angles, args.antipodal_angles)
     if any("pairs" in look for look in looks):
         print()
-        pairs_report([look for look in looks if "pairs" in look], voxel_size, args.pair_shares)
+        with_pairs = [look for look in looks if "pairs" in look]
+        pairs_report(with_pairs, voxel_size, args.pair_shares)
+        print()
+        margin_report(with_pairs, voxel_size, args.clearance_margins)
     return 0
 
 
@@ -363,6 +367,38 @@ def pairs_report(
         print(f"{label} | {group.sum()} | {_percent(list(held_pairs))} | {_percent(list(slipped))}")
 
 
+def margin_report(
+    looks: list[dict[str, np.ndarray]], voxel_size: float, margins: list[float], repeats: int = 5000
+) -> None:
+    """Print how often a random grasp of each look's answer succeeds, in the service's order, with the
+    clearance check's hand grown by each of ``margins``, its pairs cleared on the grid's surface alone
+    and on the fine cloud as well; each against the first margin on the grid's surface alone. A margin
+    below the collection's replays only what the collection's clearance check kept."""
+    grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
+                            for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
+    share = Settings.model_fields["narrow_pair_share"].default
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    orders = {"on the grid's surface": TIER_ORDERS["the pairs cleared on the grid's surface alone"],
+              "on the fine cloud too": next(iter(TIER_ORDERS.values()))}  # fmt: skip
+    values: dict[tuple[float, str], list[float]] = {}
+    for look in looks:
+        for margin in margins:
+            answers = _tier_answers(look, voxel_size, grid_cone, fine_cone, ClearanceConfig(margin=margin))
+            held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
+            for label, (checked, fallback, narrowed) in orders.items():
+                order = checked if len(answers["checked"][1]) else fallback
+                value = _answer(look, answers, held, order, share if narrowed else None)[1]
+                values.setdefault((margin, label), []).append(value)
+    reference = np.array(values[margins[0], "on the grid's surface"])
+    print(f"the clearance check's margin, in the service's order; against {margins[0] * 1000:.0f} mm with the pairs "
+          "cleared on the grid's surface alone:")  # fmt: skip
+    print("margin (mm) | pairs cleared | looks answered | success % per look | against it")
+    for (margin, label), per_look in values.items():
+        answered = [v for v in per_look if not np.isnan(v)]
+        against = _paired(reference, np.array(per_look), repeats)
+        print(f"{margin * 1000:11.1f} | {label} | {len(answered)} | {_percent(answered)} | {against}")
+
+
 def _answer(
     look: dict[str, np.ndarray],
     answers: dict[str, tuple[str, np.ndarray]],
@@ -394,17 +430,27 @@ def _paired(first: np.ndarray, second: np.ndarray, repeats: int) -> str:
 
 
 def _tier_answers(
-    look: dict[str, np.ndarray], voxel_size: float, grid_cone: float, fine_cone: float
+    look: dict[str, np.ndarray],
+    voxel_size: float,
+    grid_cone: float,
+    fine_cone: float,
+    clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
 ) -> dict[str, tuple[str, np.ndarray]]:
     """Each candidate answer of one look, as (outcomes key, row indices): the network's grasps that
     pass both checks ("checked"), those opposed on the grid's faces ("grid") or the fine cloud
     ("cloud"); the pairs that pass the grip check ("pairs") and those opposed on the grid's faces
     ("grid pairs"); every clearance-checked pair ("every pair", "every grid pair"); and the network's
-    grasps that pass both checks down to the fallback floor ("lower"). The service clears its pairs on the
-    fine cloud as well as the grid's surface (collected pairs are grid-cleared): each answer of pairs does
-    so too, and is also given as collected, :data:`GRID_CLEARED` appended to its key."""
+    grasps that pass both checks down to the fallback floor ("lower"). The clearance check is replayed
+    with ``clearance`` on the grid's surface, as collected (so a margin below the collection's keeps
+    what the collection kept); the service clears its pairs on the fine cloud as well, so each answer
+    of pairs does too, and is also given on the grid's surface alone, :data:`GRID_CLEARED` appended."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
+    support = support_height(grid, voxel_size)
+
+    def cleared(rows: np.ndarray, points: np.ndarray) -> np.ndarray:
+        tolerance = None if support is None else contact_tolerances(points, np.eye(4), support, voxel_size)
+        return approach_is_clear(points, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=tolerance)
 
     def gripping(rows: np.ndarray, indices: np.ndarray) -> np.ndarray:
         if not len(indices):
@@ -419,26 +465,25 @@ def _tier_answers(
         rotations = Rotation.from_quat(rows[indices, 3:7]).as_matrix()
         return indices[grips_antipodally(cloud, rows[indices, :3], rotations, None, cone)]
 
-    checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & (grasps[:, 9] > 0)))
-    gripping_pairs = gripping(pairs, np.arange(len(pairs)))
-    every_pair = np.arange(len(pairs))
+    surface = grid_surface_points(grid, voxel_size)
+    grasps_clear = (grasps[:, 9] > 0) & cleared(grasps, surface)
+    checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & grasps_clear))
+    every_pair = np.flatnonzero(cleared(pairs, surface))
+    gripping_pairs = gripping(pairs, every_pair)
     pair_answers = {
         "pairs": gripping_pairs,
         "grid pairs": opposed(pairs, gripping_pairs, faces, grid_cone),
         "every pair": every_pair,
         "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
     }
-    cloud = look["cloud"][:, :3].astype(np.float64)
-    support = support_height(grid, voxel_size)
-    tolerance = None if support is None else contact_tolerances(cloud, np.eye(4), support, voxel_size)
-    clear = approach_is_clear(cloud, pairs[:, :3], pairs[:, 3:7], point_tolerance=tolerance)
+    fine_clear = cleared(pairs, look["cloud"][:, :3].astype(np.float64))
     return {
         "checked": ("outcomes", checked),
         "grid": ("outcomes", opposed(grasps, checked, faces, grid_cone)),
         "cloud": ("outcomes", opposed(grasps, checked, look["cloud"], fine_cone)),
-        **{name: ("pair_outcomes", rows[clear[rows]]) for name, rows in pair_answers.items()},
+        **{name: ("pair_outcomes", rows[fine_clear[rows]]) for name, rows in pair_answers.items()},
         **{name + GRID_CLEARED: ("pair_outcomes", rows) for name, rows in pair_answers.items()},
-        "lower": ("outcomes", gripping(grasps, np.flatnonzero(grasps[:, 9] > 0))),
+        "lower": ("outcomes", gripping(grasps, np.flatnonzero(grasps_clear))),
     }
 
 
@@ -531,6 +576,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="cones (degrees) of the antipodal check on the fine cloud to compare")  # fmt: skip
     show.add_argument("--pair-shares", type=float, nargs="+", default=[0.625, 0.6875, 0.75, 0.8125, 0.875],
                       help="shares of the hand's opening the surface's pairs may close on, to compare")  # fmt: skip
+    show.add_argument("--clearance-margins", type=float, nargs="+", default=[0.002, 0.003, 0.004, 0.005],
+                      help="margins (m) of the clearance check to replay, the first the reference")  # fmt: skip
     show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
     args = parser.parse_args(argv)
     return collect(args) if args.command == "collect" else report(args)

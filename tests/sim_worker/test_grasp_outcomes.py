@@ -39,7 +39,7 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert grasp_outcomes.main(argv) == 0, "a rerun resumes"
     assert "round 0" not in capsys.readouterr().out and stored.read_bytes() == written
     report_argv = ["report", str(out), str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95",
-                   "--grid-angles", "1", "40", "--antipodal-angles", "1", "30"]  # fmt: skip
+                   "--grid-angles", "1", "40", "--antipodal-angles", "1", "30", "--clearance-margins", "0.002", "0.004"]  # fmt: skip
     assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
     assert f"{2 * len(looks)} looks" in report and "min alignment | kept" in report  # the folder twice
@@ -66,15 +66,25 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     for table in rows:
         assert len(table) == 2 and int(table[0][1]) <= int(table[1][1])
     # The network-first orders answer the same looks (they differ in what answers), each compared with
-    # the service's; the baseline answers only where a checked pair exists, so no more looks.
+    # the service's; the baseline answers only where a checked pair exists, so no more looks; pairs
+    # cleared on the grid's surface alone are a superset of those cleared on the fine cloud too.
     orders = report.split("a random grasp of each look's answer:")[1].split("\n\n")[0].splitlines()[2:]
-    assert len(orders) == 4, report
+    assert len(orders) == 5, report
     assert len({line.split("|")[1] for line in orders[:3]}) == 1, report
     assert int(orders[3].split("|")[1]) <= int(orders[0].split("|")[1])
+    assert int(orders[4].split("|")[1]) >= int(orders[0].split("|")[1])
     assert all("paired over" in line.split("|")[4] for line in orders[1:]), report
+    # Each margin of the clearance check, its pairs cleared on the grid's surface and on the fine cloud
+    # too, against the first margin on the grid's surface (itself: nothing differs). A wider hand
+    # answers no more looks.
+    margins = report.split("margin (mm) | pairs cleared")[1].strip().splitlines()[1:]
+    assert len(margins) == 4, report
+    assert "(0 differ)" in margins[0] and all("paired over" in line for line in margins)
+    answered = [int(line.split("|")[2]) for line in margins]
+    assert answered[1] <= answered[0] and answered[2] <= answered[0] and answered[3] <= answered[2]
     # Narrowing the pairs to each share of the opening, then every executed pair split at the default share.
     shares = report.split("share of the opening |")[1].split("\n\n")[0].splitlines()[1:]
     assert len(shares) == 5, report
-    split = report.split("pairs | executed | success % | slipped %")[1].strip().splitlines()
+    split = report.split("pairs | executed | success % | slipped %")[1].split("\n\n")[0].strip().splitlines()
     executed = sum(len(look["pair_outcomes"]) for look in looks)
     assert sum(int(line.split("|")[1]) for line in split) == 2 * executed  # the folder twice
