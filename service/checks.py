@@ -65,14 +65,16 @@ def check_grasps(
     workspace_size: float,
     grip_config: GripConfig = GripConfig(),  # noqa: B008 (frozen: one shared default is safe)
     alternatives: bool = True,
+    clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
 ) -> Checked:
     """Run the clearance check on ``surface`` (world-frame points; None: not run) and the grip check
     on ``grid`` (the network's input; None: not run) over ``grasps`` (world frame, best first),
-    trying :data:`ALTERNATIVES` for the dropped ones when ``alternatives``. The clearance check also
-    drops grasps whose open fingers reach outside the workspace cube (``workspace_size``, m)."""
+    trying :data:`ALTERNATIVES` for the dropped ones when ``alternatives``. The clearance check (its
+    settings ``clearance``) also drops grasps whose open fingers reach outside the workspace cube
+    (``workspace_size``, m)."""
     if not grasps or (surface is None and grid is None):
         return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0, _count(surface, 0))
-    seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size)
+    seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size, clearance)
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     orientations = Rotation.from_quat([g.orientation for g in grasps])
     inside, approach_clear, measure = _stages(positions, orientations, seen)
@@ -146,16 +148,17 @@ def clear_of(
     voxel_size: float,
     workspace_pose: np.ndarray,
     workspace_size: float,
+    clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
 ) -> list[Grasp]:
     """The ``grasps`` whose open hand's approach misses ``points`` (world frame), judged as
-    :func:`check_grasps` judges its surface: the support plane (found on ``grid``; None: none) may
+    :func:`check_grasps` judges its surface with ``clearance``: the support plane (found on ``grid``; None: none) may
     meet the fingertips in the approach's last :data:`SUPPORT_CONTACT_TOLERANCE`. The surface's
     antipodal pairs are cleared so against the fine cloud they were found on, whose 2.5 mm surface
     shows what brushes past the fingers between the grid's 7.5 mm crossings."""
     if not grasps:
         return []
     seen = _observed(np.asarray(points, dtype=np.float64).reshape(-1, 3), grid, voxel_size, workspace_pose,
-                     workspace_size)  # fmt: skip
+                     workspace_size, clearance)  # fmt: skip
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     clear = _approach_clear(positions, np.array([g.orientation for g in grasps], dtype=np.float64), seen)
     return [g for g, ok in zip(grasps, clear, strict=True) if ok]
@@ -169,7 +172,8 @@ def _count(check_input: np.ndarray | None, dropped: int) -> int | None:
 class _Observed:
     """What a request's grasps are judged against, worked out once for all their poses: the world
     frame surface (None: no clearance check) with each point's contact tolerance, the grid (None:
-    no grip check), the workspace and the support plane's height (None: none found, or no grid)."""
+    no grip check), the workspace, the support plane's height (None: none found, or no grid) and the
+    clearance check's settings."""
 
     surface: np.ndarray | None
     tolerance: np.ndarray | None
@@ -178,6 +182,7 @@ class _Observed:
     to_workspace: np.ndarray
     workspace_size: float
     support: float | None
+    clearance: ClearanceConfig = ClearanceConfig()  # noqa: RUF009 (frozen: one shared default is safe)
 
 
 def _observed(
@@ -186,13 +191,14 @@ def _observed(
     voxel_size: float,
     workspace_pose: np.ndarray,
     workspace_size: float,
+    clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
 ) -> _Observed:
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     support = None if grid is None else support_height(grid, voxel_size)
     tolerance = None
     if surface is not None and support is not None:
         tolerance = contact_tolerances(surface, to_workspace, support, voxel_size)
-    return _Observed(surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support)
+    return _Observed(surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support, clearance)
 
 
 def _judge(
@@ -229,7 +235,9 @@ def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: _Obser
     """(G,) bool: the open hand's approach misses the surface. The support plane's points may meet the
     hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the approach: fingertips on the table stop a
     guarded approach there, around a flat object."""
-    return approach_is_clear(seen.surface, positions, quaternions, point_tolerance=seen.tolerance)
+    return approach_is_clear(
+        seen.surface, positions, quaternions, seen.clearance, point_tolerance=seen.tolerance
+    )
 
 
 def contact_tolerances(

@@ -28,6 +28,11 @@ from vgn_contract.schemas import Grasp
 _CHUNK = 1 << 20
 
 
+#: Where the clearance check's default margin leaves a look no grasp at all, the service answers with
+#: what clears a hand grown by this much less rather than nothing (docs/concepts.md, "The clearance check").
+FALLBACK_MARGIN = 0.002
+
+
 @dataclass(frozen=True)
 class ClearanceConfig:
     """Knobs of the check.

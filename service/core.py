@@ -18,6 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
 from service.checks import Checked, check_grasps, clear_of
+from service.clearance import FALLBACK_MARGIN, ClearanceConfig
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
@@ -320,9 +321,11 @@ class PlanningService:
             model = network.model_id or ""
             threshold = resolved_threshold(query, network.default_threshold)
 
+        margin = ClearanceConfig()  # the clearance check's, relaxed below where it leaves nothing
+
         def checked_of(candidates: list[Grasp], grip_grid: np.ndarray | None = grid) -> Checked:
             return check_grasps(candidates, surface, grip_grid, voxel_size, workspace_pose, workspace_size,
-                                self.grip_config, self.settings.alternatives)  # fmt: skip
+                                self.grip_config, self.settings.alternatives, margin)  # fmt: skip
 
         cloud: np.ndarray | None = observed if baseline else None
 
@@ -333,48 +336,63 @@ class PlanningService:
                     cloud = session.volume.cloud()
             return cloud
 
+        found_pairs: dict[AntipodalConfig, list[Grasp]] = {}
+
         def checked_pairs(config: AntipodalConfig, grip_grid: np.ndarray | None = grid) -> Checked:
             # The surface's pairs, cleared against the fine cloud they were found on as well as the
             # grid's surface: the grid's coarser surface misses what brushes past the fingers.
-            checked = checked_of(
-                plan_antipodal(fine_cloud(), workspace_pose, config, session_hand), grip_grid
-            )
+            if config not in found_pairs:
+                found_pairs[config] = plan_antipodal(fine_cloud(), workspace_pose, config, session_hand)
+            checked = checked_of(found_pairs[config], grip_grid)
             if surface is None:
                 return checked
             pairs = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
-                             workspace_size)  # fmt: skip
+                             workspace_size, margin)  # fmt: skip
             dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(pairs)
             return replace(checked, grasps=pairs, clearance_dropped=dropped)
 
-        checked = checked_pairs(antipodal_config(ranked)) if baseline else checked_of(grasps)
-        if faces is not None and checked.grasps:
-            checked, model = self._opposed(
-                checked, model, faces, fine_cloud, session_hand, checked_pairs, ranked
-            )
-            if model == "antipodal":  # the surface's pairs answer, at the baseline's threshold
-                threshold = antipodal_config(ranked).threshold
-        floor = self.settings.fallback_threshold
-        checks_ran = surface is not None or grid is not None
-        fallback = (not baseline and checks_ran and not checked.grasps and query.threshold is None
-                    and floor < threshold)  # fmt: skip
-        if fallback:
-            # Nothing passed at the operating threshold: rather than leave the robot with nothing to
-            # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
-            lower = ranked.model_copy(update={"threshold": floor})
-            threshold = floor
-            # The surface's pairs first, under the clearance check alone: their own antipodal test on
-            # the fine cloud stands in for the grip check, whose coarse grid misses thin walls. Then
-            # the network's grasps below its threshold, where the surface offers none.
-            pairs = None
-            if self.settings.surface_fallback:
-                pairs = checked_pairs(antipodal_config(lower), None)
-            if pairs is not None and pairs.grasps:
-                # Those whose pads meet opposed faces of the grid's surface too, where there are some.
-                kept = self._opposed_on_grid(pairs.grasps, faces, session_hand) if faces is not None else []
-                narrow = self._narrow_first(kept or pairs.grasps, session_hand)
-                checked, model = replace(pairs, grasps=narrow), "antipodal"
-            else:
-                checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
+        def answer() -> tuple[Checked, str, float, bool]:
+            """The checked grasps, the model and threshold that answer, and whether the threshold fell back."""
+            answering, threshold_now = model, threshold
+            checked = checked_pairs(antipodal_config(ranked)) if baseline else checked_of(grasps)
+            if faces is not None and checked.grasps:
+                checked, answering = self._opposed(
+                    checked, answering, faces, fine_cloud, session_hand, checked_pairs, ranked
+                )
+                if answering == "antipodal":  # the surface's pairs answer, at the baseline's threshold
+                    threshold_now = antipodal_config(ranked).threshold
+            floor = self.settings.fallback_threshold
+            checks_ran = surface is not None or grid is not None
+            fallback = (not baseline and checks_ran and not checked.grasps and query.threshold is None
+                        and floor < threshold_now)  # fmt: skip
+            if fallback:
+                # Nothing passed at the operating threshold: rather than leave the robot with nothing to
+                # do, answer with what the checks vouch for down to the floor, and say so in ``threshold``.
+                lower = ranked.model_copy(update={"threshold": floor})
+                threshold_now = floor
+                # The surface's pairs first, under the clearance check alone: their own antipodal test on
+                # the fine cloud stands in for the grip check, whose coarse grid misses thin walls. Then
+                # the network's grasps below its threshold, where the surface offers none.
+                pairs = None
+                if self.settings.surface_fallback:
+                    pairs = checked_pairs(antipodal_config(lower), None)
+                if pairs is not None and pairs.grasps:
+                    # Those whose pads meet opposed faces of the grid's surface too, where there are some.
+                    kept = (
+                        self._opposed_on_grid(pairs.grasps, faces, session_hand) if faces is not None else []
+                    )
+                    narrow = self._narrow_first(kept or pairs.grasps, session_hand)
+                    checked, answering = replace(pairs, grasps=narrow), "antipodal"
+                else:
+                    checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
+            return checked, answering, threshold_now, fallback
+
+        checked, answering, answered_threshold, fallback = answer()
+        if surface is not None and not checked.grasps and margin.margin > FALLBACK_MARGIN:
+            # Nothing clears the wider hand: what clears the narrower one, rather than nothing.
+            margin = replace(margin, margin=FALLBACK_MARGIN)
+            checked, answering, answered_threshold, fallback = answer()
+        model, threshold = answering, answered_threshold
         grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
         return GraspResult(
             grasps=grasps,

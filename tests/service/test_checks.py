@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
 from service.checks import SUPPORT_CONTACT_TOLERANCE, Checked, check_grasps, clear_of, contact_tolerances
-from service.clearance import ClearanceConfig, approach_is_clear, clear_grasps
+from service.clearance import FALLBACK_MARGIN, ClearanceConfig, approach_is_clear, clear_grasps
 from service.core import PlanningService
 from service.grid_surface import grid_surface_points
 from service.grip import GripConfig, gripping_grasps, support_height
@@ -349,3 +349,31 @@ def test_the_fingertips_may_meet_the_table_in_the_last_centimetre_of_the_approac
     assert not clear(within - 0.02, raised, contact_tolerances(raised, np.eye(4), support, VOXEL))
     with pytest.raises(ValueError, match="contact tolerances"):
         clear(within, tolerances=tolerance[:-1])
+
+
+def test_where_the_wider_hand_clears_nothing_the_narrower_one_answers():
+    """A low slab (10 x 6 x 2.5 cm), the surface's pairs off: the network's grasps below its threshold
+    all pass within the default margin of the slab's sides. Rather than nothing, the answer is what
+    clears a hand grown by the fallback margin."""
+    service = PlanningService.from_settings(
+        Settings(model=PACKAGED_MODEL, api_key=None, surface_fallback=False)
+    )
+    try:
+        scene = BoxScene(lower=(0.12, 0.12, TABLE_Z), upper=(0.22, 0.18, TABLE_Z + 0.025))
+        session = service.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+        for pose in circle_views():
+            service.add_frame(session, scene.depth(pose), pose)
+        answer = service.plan(session, GraspQuery())
+        with service.sessions.use(session) as state:
+            surface = state.volume.surface_points()
+        grid = service.grid(session)
+    finally:
+        service.close()
+    assert answer.grasps and answer.fallback is True
+
+    def cleared(margin: float) -> list[Grasp]:
+        config = ClearanceConfig(margin=margin)
+        return check_grasps(answer.grasps, surface, grid, VOXEL, np.eye(4), SIZE, alternatives=False,
+                            clearance=config).grasps  # fmt: skip
+
+    assert cleared(ClearanceConfig().margin) == [] and cleared(FALLBACK_MARGIN) == answer.grasps

@@ -102,7 +102,9 @@ def test_contact_in_the_last_millimetres_of_the_approach_is_tolerated():
     def table(depth: float) -> np.ndarray:  # the fingertips end ``depth`` below the plane
         return np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, 0.05 - depth)])
 
-    into = DEFAULT.contact_tolerance - DEFAULT.margin - 0.0005  # the grown fingertips just within the tolerance
+    into = (
+        DEFAULT.contact_tolerance - DEFAULT.margin - 0.0005
+    )  # the grown fingertips just within the tolerance
     assert into > 0.0
     assert clear(table(-0.003))  # 3 mm short of the table
     assert clear(table(into))
