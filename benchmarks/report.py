@@ -251,7 +251,11 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                       "three quarters of the hand's opening, where some do), after the grid's opposed pairs came first, "
                       "do to the default request? (Runs that newer results replace in the README's table.)"),
     ("held-opening-", "What does offering no pair whose faces lie within the hand's held opening do to the default "
-                      "request, against the code before on the same machine (the before runs carry a variant.md)?"),
+                      "request, against the code before on the same machine (the before runs carry a variant.md)? "
+                      "(Runs that newer results replace in the README's table.)"),
+    ("clearance-margin-", "What do a clearance check whose hand is grown by 4 mm instead of 2 (2 mm where 4 leaves "
+                          "nothing) and the surface's pairs cleared on the fine cloud do to the default request and "
+                          "to the antipodal baseline (the steps on the way carry a variant.md)?"),
     ("seed-2-", "Does a second seed (another draw of scenes, the same command) agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
                        "do to the default request? (Runs that newer results replace in the README's table.)"),

@@ -141,10 +141,9 @@ def test_before_the_lower_threshold_the_surfaces_antipodal_pairs_are_checked_and
     settings = Settings(model=PACKAGED_MODEL, api_key=None, surface_fallback=surface_fallback)
     service = PlanningService.from_settings(settings)
     try:
-        scene = BoxScene(lower=(0.12, 0.12, TABLE_Z), upper=(0.22, 0.17, TABLE_Z + 0.025))
-        session = service.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
-        for pose in circle_views():
-            service.add_frame(session, scene.depth(pose), pose)
+        session = fused_session(
+            service, BoxScene(lower=(0.12, 0.12, TABLE_Z), upper=(0.22, 0.17, TABLE_Z + 0.025))
+        )
         answer = service.plan(session, GraspQuery())
         assert answer.fallback is True and answer.threshold == settings.fallback_threshold
         if not surface_fallback:
@@ -359,10 +358,9 @@ def test_where_the_wider_hand_clears_nothing_the_narrower_one_answers():
         Settings(model=PACKAGED_MODEL, api_key=None, surface_fallback=False)
     )
     try:
-        scene = BoxScene(lower=(0.12, 0.12, TABLE_Z), upper=(0.22, 0.18, TABLE_Z + 0.025))
-        session = service.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
-        for pose in circle_views():
-            service.add_frame(session, scene.depth(pose), pose)
+        session = fused_session(
+            service, BoxScene(lower=(0.12, 0.12, TABLE_Z), upper=(0.22, 0.18, TABLE_Z + 0.025))
+        )
         answer = service.plan(session, GraspQuery())
         with service.sessions.use(session) as state:
             surface = state.volume.surface_points()

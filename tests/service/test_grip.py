@@ -171,10 +171,11 @@ def trained() -> Iterator[PlanningService]:
     service.close()
 
 
-def fused_session(core: PlanningService) -> str:
+def fused_session(core: PlanningService, scene: BoxScene | None = None) -> str:
+    """A session with ``scene`` (default the usual box) fused from the six circle views."""
     session = core.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
     for pose in circle_views():
-        core.add_frame(session, BoxScene().depth(pose), pose)
+        core.add_frame(session, (scene or BoxScene()).depth(pose), pose)
     return session
 
 
