@@ -9,7 +9,8 @@ The hand is the session's gripper description (``vgn_contract.gripper_descriptio
 ``franka``, whose boxes a test compares with ``sim_worker/assets/gripper.urdf``), every part a
 box in the grasp frame (docs/conventions.md), each swept box tested exactly for the points
 inside the swept hand's bounding box. The service passes the zero crossings of the session's
-coarse TSDF (``SceneVolume.surface_points``), far cheaper than the fine cloud of ``/cloud``.
+coarse TSDF (``SceneVolume.surface_points``), far cheaper than the fine cloud of ``/cloud``; the
+surface's antipodal pairs, found on the fine cloud, are cleared against it as well.
 """
 
 from __future__ import annotations

@@ -291,7 +291,9 @@ class PlanningService:
             observed = session.volume.cloud() if baseline else session.volume.grid()
             grid = (session.volume.grid() if baseline else observed) if grip else None
             # The grid the support plane is found on, for clearing the surface's pairs.
-            support_grid = grid if grid is not None or not baseline else session.volume.grid()
+            support_grid = grid if grid is not None else observed if not baseline else None
+            if support_grid is None and clearance:
+                support_grid = session.volume.grid()
             # The antipodal check refines the grip check where it runs: whether the pads meet opposed
             # faces (one frame shows one face of each object: no grip check then), on the grid's faces
             # first; the fine cloud is read only where those do not settle it.

@@ -186,8 +186,8 @@ def test_the_surfaces_pairs_clear_the_fine_cloud_they_were_found_on(core):
 
     found = plan_antipodal(cloud, pose, antipodal_config(query), default_gripper())
     on_grid = check_grasps(found, surface, grid, workspace.voxel_size, pose, workspace.size, core.grip_config,
-                           core.settings.alternatives).grasps  # fmt: skip
-    brushing = len(on_grid) - len(clear_of_cloud(on_grid))
+                           core.settings.alternatives)  # fmt: skip
+    brushing = len(on_grid.grasps) - len(clear_of_cloud(on_grid.grasps))
     assert brushing > 0  # the scene has such a pair
-    assert answer.grasps == clear_of_cloud(on_grid)
-    assert answer.clearance_dropped >= brushing
+    assert answer.grasps == clear_of_cloud(on_grid.grasps)
+    assert answer.clearance_dropped == on_grid.clearance_dropped + brushing
