@@ -233,6 +233,19 @@ def test_of_two_runs_on_one_day_the_readme_shows_the_later(tmp_path: Path, monke
     assert report.measured_at(None) == ""
 
 
+def test_a_later_run_of_another_seed_stays_out_of_the_readme(tmp_path: Path, monkeypatch):
+    """The README's table shows the benchmark's default seed: a repeat on another draw of scenes,
+    however new, is tabled on its own page and leaves the README's cell as it was."""
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    day = ROW["measured"]["date"]
+    clutter_results(tmp_path / "a-seed-1", [{**ROW, "measured": {**ROW["measured"], "time": "09:30:00"}}])
+    clutter_results(tmp_path / "b-seed-2", [{**ROW, "success_rate": 41.0, "measured": {"date": day, "time": "18:00:00"}}],
+                    settings="seed 2, rounds per scenario 100, six view(s)")  # fmt: skip
+    assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
+    assert report.run_seed(tmp_path / "b-seed-2" / "bench-a") == 2
+    assert report.run_seed(tmp_path / "a-seed-1" / "bench-a") == report.HEADLINE_SEED
+
+
 def test_the_readme_table_keeps_the_operating_threshold(tmp_path: Path, monkeypatch):
     """A run of the packaged weights at another threshold is another operating point: newer or
     not, it stays out of the README's table (the operating curves table it)."""
