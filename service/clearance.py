@@ -5,13 +5,11 @@ opening 5 cm back along the approach and moves it straight to the grasp pose. A 
 *clear* when none of the hand's parts, swept along that path, comes near more than
 ``min_points - 1`` observed surface points; points between the fingers never count.
 
-The hand is the session's gripper description (``vgn_contract.gripper_description``; by default
-``franka``, whose boxes a test compares with ``sim_worker/assets/gripper.urdf``), every part a
-box in the grasp frame (docs/conventions.md), each swept box tested exactly for the points
-inside the swept hand's bounding box. The service passes the zero crossings of the session's
-coarse TSDF (``SceneVolume.surface_points``), far cheaper than the fine cloud of ``/cloud``; the
-surface's antipodal pairs, found on the fine cloud, are cleared against it as well.
-"""
+The hand is the session's gripper description (``vgn_contract.gripper_description``, by default
+``franka``), every part a box in the grasp frame (docs/conventions.md), each swept box tested
+exactly for the points inside its bounding box. Network grasps are cleared against the coarse
+TSDF's zero crossings (``SceneVolume.surface_points``, far cheaper than ``/cloud``); the
+surface's antipodal pairs, found on the fine cloud, against that cloud."""
 
 from __future__ import annotations
 
