@@ -410,6 +410,7 @@ class PlanningService:
             clearance=clearance,
             grip=grip_on,
             fallback=fallback,
+            clearance_margin=margin.margin if surface is not None else None,
         )
 
     def _opposed(

@@ -465,4 +465,5 @@ def _grasp_row(record: RoundRecord, grasp: Grasp, trial: GraspTrial, observed: O
         "first_grasp_ms": observed.first_grasp_ms,
         "model": answer.model,
         "threshold": answer.threshold,
+        "clearance_margin": "" if answer.clearance_margin is None else answer.clearance_margin,
     }

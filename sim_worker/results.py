@@ -72,9 +72,11 @@ GRASP_COLUMNS = [
     "disturbance",
     "loop",
     "looks",
-    # what answered the look: the weights' id or "antipodal" (the surface's pairs), at which threshold
+    # what answered the look: the weights' id or "antipodal" (the surface's pairs), at which threshold,
+    # cleared for how wide a hand (m grown on every side; empty without the clearance check)
     "model",
     "threshold",
+    "clearance_margin",
 ]
 
 

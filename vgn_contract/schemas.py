@@ -435,6 +435,12 @@ class GraspResult(_Model):
         "the lower fallback threshold (threshold says which; vgn requests that name no threshold only); "
         "null only from a service older than this field",
     )
+    clearance_margin: float | None = Field(
+        default=None,
+        description="metres the clearance check grew the hand by on every side for these grasps: the "
+        "service's margin, or its narrower fallback margin where the wider hand left nothing clear; null "
+        "when the check did not run, or from a service older than this field",
+    )
 
 
 class GripperInfo(_Model):

@@ -367,7 +367,7 @@ def test_where_the_wider_hand_clears_nothing_the_narrower_one_answers():
         grid = service.grid(session)
     finally:
         service.close()
-    assert answer.grasps and answer.fallback is True
+    assert answer.grasps and answer.fallback is True and answer.clearance_margin == FALLBACK_MARGIN
 
     def cleared(margin: float) -> list[Grasp]:
         config = ClearanceConfig(margin=margin)

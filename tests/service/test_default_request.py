@@ -14,6 +14,7 @@ import pytest
 
 from client.grpc_client import GRPCClient
 from client.http import VGNClient
+from service.clearance import ClearanceConfig
 from service.launch.embedded import EmbeddedService
 from service.settings import PACKAGED_MODEL
 from service.vgn.checkpoint import card_path
@@ -75,7 +76,7 @@ def bare_grpc_grasps(service: EmbeddedService, session: str) -> pb.GraspResult:
 def same_answer(a: GraspResult, b: GraspResult) -> bool:
     """Equal grasps, and the same account of what was done (timings apart)."""
     keys = ("grasps", "threshold", "model", "turn_average", "clearance", "grip", "fallback", "clearance_dropped",
-            "grip_dropped")  # fmt: skip
+            "grip_dropped", "clearance_margin")  # fmt: skip
     return all(getattr(a, key) == getattr(b, key) for key in keys)
 
 
@@ -89,6 +90,7 @@ def test_a_request_that_does_not_say_is_turn_averaged_and_clearance_and_grip_che
         assert result.turn_average is True and result.clearance_dropped is not None
         assert result.grip_dropped is not None
         assert (result.clearance, result.grip, result.fallback) == (True, True, False), "each answer says"
+        assert result.clearance_margin == ClearanceConfig().margin, "the wider hand cleared these"
     assert same_answer(over_http, over_grpc)
     # As asked for explicitly, and the check did drop some of the averaged grasps here.
     for result, explicit in zip(answers(default, session), answers(default, session, **BEST), strict=True):
@@ -98,6 +100,7 @@ def test_a_request_that_does_not_say_is_turn_averaged_and_clearance_and_grip_che
     for switch in ("clearance", "grip"):
         unchecked = answers(default, session, **{switch: False})[0]
         assert unchecked.turn_average is True and getattr(unchecked, f"{switch}_dropped") is None
+        assert (unchecked.clearance_margin is None) == (switch == "clearance")
         # The checks keep or re-pose the unchecked grasps: never more of them, each at one's quality.
         assert len(kept) <= len(unchecked.grasps)
         assert {g.quality for g in kept} <= {g.quality for g in unchecked.grasps}

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from service.clearance import FALLBACK_MARGIN, ClearanceConfig
 from sim_worker.camera import WORKSPACE_CENTRE
 from sim_worker.clutter import camera_views
 from sim_worker.metrics import failure_breakdown, summarize, wilson_interval
@@ -466,4 +467,6 @@ def test_a_random_view_is_drawn_anew_for_every_look(tmp_path: Path, monkeypatch)
     assert rows and {(row["model"], row["threshold"]) for row in rows} == {
         ("antipodal", str(ANTIPODAL_DEFAULT_THRESHOLD))
     }
+    # ... cleared for the service's hand, or its narrower fallback hand where that left nothing.
+    assert {row["clearance_margin"] for row in rows} <= {str(ClearanceConfig().margin), str(FALLBACK_MARGIN)}
     assert json.loads((results / "config.json").read_text())["views"] == "random"

@@ -300,6 +300,7 @@ def grasp_result(message: pb.GraspResult) -> GraspResult:
                 "clearance",
                 "grip",
                 "fallback",
+                "clearance_margin",
             ),
         ),
     )

@@ -238,7 +238,7 @@ class Grasp(_message.Message):
     def __init__(self, position: _Optional[_Union[Vector3, _Mapping]] = ..., orientation: _Optional[_Union[Quaternion, _Mapping]] = ..., approach: _Optional[_Union[Vector3, _Mapping]] = ..., width: _Optional[float] = ..., quality: _Optional[float] = ..., track_id: _Optional[int] = ...) -> None: ...
 
 class GraspResult(_message.Message):
-    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average", "grip_dropped", "clearance", "grip", "fallback", "workspace_dropped")
+    __slots__ = ("grasps", "planning_ms", "integration_ms", "frame_count", "model", "threshold", "clearance_dropped", "turn_average", "grip_dropped", "clearance", "grip", "fallback", "workspace_dropped", "clearance_margin")
     GRASPS_FIELD_NUMBER: _ClassVar[int]
     PLANNING_MS_FIELD_NUMBER: _ClassVar[int]
     INTEGRATION_MS_FIELD_NUMBER: _ClassVar[int]
@@ -252,6 +252,7 @@ class GraspResult(_message.Message):
     GRIP_FIELD_NUMBER: _ClassVar[int]
     FALLBACK_FIELD_NUMBER: _ClassVar[int]
     WORKSPACE_DROPPED_FIELD_NUMBER: _ClassVar[int]
+    CLEARANCE_MARGIN_FIELD_NUMBER: _ClassVar[int]
     grasps: _containers.RepeatedCompositeFieldContainer[Grasp]
     planning_ms: float
     integration_ms: float
@@ -265,7 +266,8 @@ class GraspResult(_message.Message):
     grip: bool
     fallback: bool
     workspace_dropped: int
-    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ..., grip_dropped: _Optional[int] = ..., clearance: _Optional[bool] = ..., grip: _Optional[bool] = ..., fallback: _Optional[bool] = ..., workspace_dropped: _Optional[int] = ...) -> None: ...
+    clearance_margin: float
+    def __init__(self, grasps: _Optional[_Iterable[_Union[Grasp, _Mapping]]] = ..., planning_ms: _Optional[float] = ..., integration_ms: _Optional[float] = ..., frame_count: _Optional[int] = ..., model: _Optional[str] = ..., threshold: _Optional[float] = ..., clearance_dropped: _Optional[int] = ..., turn_average: _Optional[bool] = ..., grip_dropped: _Optional[int] = ..., clearance: _Optional[bool] = ..., grip: _Optional[bool] = ..., fallback: _Optional[bool] = ..., workspace_dropped: _Optional[int] = ..., clearance_margin: _Optional[float] = ...) -> None: ...
 
 class GetGridRequest(_message.Message):
     __slots__ = ("session_id",)
