@@ -252,6 +252,7 @@ class ClutterRemoval:
             trial, disturbance, watch = self._attempt(grasp, disturber, retry=aborts > 0)
             row = _grasp_row(record, grasp, trial, observed)
             row["contact"] = "+".join(self._body_name(body) for body in trial.contact_bodies)
+            row["closed_on"] = "+".join(self._body_name(body) for body in trial.closed_on)
             # A retry after a withdrawal belongs to the disturbed attempt: it carries its disturbance.
             carried = disturbance or (withdrawn_from if aborts else None)
             row["disturbance"] = carried.kind if carried else ""
@@ -466,4 +467,5 @@ def _grasp_row(record: RoundRecord, grasp: Grasp, trial: GraspTrial, observed: O
         "model": answer.model,
         "threshold": answer.threshold,
         "clearance_margin": "" if answer.clearance_margin is None else answer.clearance_margin,
+        "fallback": "" if answer.fallback is None else int(answer.fallback),
     }

@@ -50,7 +50,8 @@ class GraspTrial:
     """What happened: ``label`` is 1 when an object was lifted and held.
 
     When the approach stopped on contact, ``contact_bodies`` are the bodies the hand touched
-    and ``contact_distance`` how far (m) before the grasp pose it stopped."""
+    and ``contact_distance`` how far (m) before the grasp pose it stopped. ``closed_on`` are the
+    objects the closed hand touched: what a failed grasp was on, to tell which objects fail."""
 
     outcome: Outcome
     width: float  # finger opening at the end (m); the max opening after a collision
@@ -59,6 +60,7 @@ class GraspTrial:
     seconds: float
     contact_bodies: tuple[int, ...] = ()
     contact_distance: float | None = None
+    closed_on: tuple[int, ...] = ()
 
     @property
     def label(self) -> int:
@@ -112,12 +114,14 @@ def execute_grasp(
     started, first_step = time.perf_counter(), world.sim_time
 
     contact: tuple[tuple[int, ...], float] | None = None
+    closed_on: tuple[int, ...] = ()
 
     def finish(outcome: Outcome, width: float, body: int | None = None) -> GraspTrial:
         gripper.park()
         steps = round((world.sim_time - first_step) / world.config.timestep)
         bodies, distance = contact if contact else ((), None)
-        return GraspTrial(outcome, width, body, steps, time.perf_counter() - started, bodies, distance)
+        seconds = time.perf_counter() - started
+        return GraspTrial(outcome, width, body, steps, seconds, bodies, distance, closed_on)
 
     pregrasp_distance = gripper.spec.pregrasp_distance
     gripper.reset(translated(grasp_pose, [0.0, 0.0, -pregrasp_distance]))
@@ -139,6 +143,7 @@ def execute_grasp(
             return finish(Outcome.INTERRUPTED, gripper.opening())
     empty = gripper.spec.hand.held_opening
     gripper.close(stop_when_empty=empty if fast else None)
+    closed_on = tuple(sorted(gripper.touching() & set(world.objects)))
     closed_on_something = gripper.opening() > empty and bool(
         gripper.bodies_between_fingers() & set(world.objects)
     )

@@ -77,6 +77,10 @@ GRASP_COLUMNS = [
     "model",
     "threshold",
     "clearance_margin",
+    # whether nothing passed at the operating threshold and the service answered below it; the
+    # objects the closed hand touched (empty when it never closed)
+    "fallback",
+    "closed_on",
 ]
 
 

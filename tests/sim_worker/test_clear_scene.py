@@ -469,4 +469,7 @@ def test_a_random_view_is_drawn_anew_for_every_look(tmp_path: Path, monkeypatch)
     }
     # ... cleared for the service's hand, or its narrower fallback hand where that left nothing.
     assert {row["clearance_margin"] for row in rows} <= {str(ClearanceConfig().margin), str(FALLBACK_MARGIN)}
+    # The baseline never answers below its threshold; a held object was closed on, by name.
+    assert {row["fallback"] for row in rows} == {"0"}
+    assert all(row["closed_on"] for row in rows if row["outcome"] == "success")
     assert json.loads((results / "config.json").read_text())["views"] == "random"

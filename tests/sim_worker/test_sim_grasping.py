@@ -43,6 +43,7 @@ def test_top_down_grasp_on_a_box_succeeds(world, yaw_deg):
     trial = execute_grasp(world, gripper, grasp([0.15, 0.15, 0.12], rotation))
     assert trial.outcome is Outcome.SUCCESS and trial.label == 1
     assert trial.grasped_body == body and body not in world.objects
+    assert trial.closed_on == (body,)
     assert trial.width == pytest.approx(0.05, abs=0.003), "closed on the 5 cm box"
 
 
@@ -77,6 +78,17 @@ def test_empty_grasp_fails(world):
     trial = execute_grasp(world, Gripper(world), grasp([0.05, 0.05, 0.12], DOWN))
     assert trial.outcome is Outcome.NOTHING_HELD and trial.label == 0
     assert trial.width < 0.01
+    assert trial.closed_on == ()
+
+
+def test_a_plate_thinner_than_the_held_opening_holds_nothing_but_is_closed_on(world):
+    """Fingers that close on a 5 mm plate stay within the held opening: nothing held, though the
+    hand touched the plate, which the trial names so that such failures can be traced to it."""
+    plate = add_box(world, half_extents=(0.0025, 0.03, 0.03))  # 5 mm thick along x, upright
+    across = Rotation.from_euler("z", 90, degrees=True) * DOWN  # fingers close along world x
+    trial = execute_grasp(world, Gripper(world), grasp([0.15, 0.15, 0.14], across))
+    assert trial.outcome is Outcome.NOTHING_HELD
+    assert trial.closed_on == (plate,)
 
 
 def test_contact_during_approach_fails_when_not_allowed(world):
@@ -153,3 +165,4 @@ def test_an_object_too_heavy_to_lift_slips(world):
     trial = execute_grasp(world, Gripper(world), grasp([0.15, 0.15, 0.12], DOWN))
     assert trial.outcome is Outcome.SLIPPED and trial.label == 0
     assert trial.contact_bodies == () and trial.contact_distance is None
+    assert len(trial.closed_on) == 1, "the slipped box was between the fingers"
