@@ -29,7 +29,8 @@ Inputs:
 Outputs in ``docs/generated/`` (included into the pages by ``pymdownx.snippets``): ``clutter.md``,
 ``experiments.md``, ``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
 ``operating-curves.md`` (clutter results of one model and request at several thresholds; drawn by
-``python -m benchmarks.operating_curve``), ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
+``python -m benchmarks.operating_curve``), ``failures-by-object.md`` (from ``docs/results/**/grasps.csv``:
+``python -m benchmarks.failures``), ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
 results exist, the block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` in
 README.md is rewritten with the headline table too (without dates: the benchmark page carries them).
 """
@@ -47,6 +48,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from benchmarks.failures import failures_page
 from benchmarks.paper import PAPER_TABLE_1, SCENARIOS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -1041,6 +1043,7 @@ def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
         "device-planning.md": ("docs/results/**/device_planning.json", lambda: device_planning_page(results)),
         "fleet.md": ("docs/results/**/fleet.json", lambda: fleet_page(results)),
         "operating-curves.md": ("docs/results/**/table.json", lambda: curves_page(results)),
+        "failures-by-object.md": ("docs/results/**/grasps.csv", lambda: failures_page(results)),
         "training-data.md": (
             "data/manifest.json, docs/results/**/recipe-training.json",
             lambda: training_data_page(json.loads(DATA_MANIFEST.read_text()), results),

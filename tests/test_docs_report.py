@@ -126,7 +126,8 @@ def test_the_command_writes_then_checks(tmp_path: Path, monkeypatch):
     assert report.main(argv) == 0
     assert {p.name for p in out.iterdir()} == {"clutter.md", "latency.md", "configuration.md", "http-endpoints.md",
                                                "model-card.md", "training-data.md", "fleet.md", "device-planning.md",
-                                               "operating-curves.md", "clear-scene-options.md", "experiments.md"}  # fmt: skip
+                                               "operating-curves.md", "clear-scene-options.md", "experiments.md",
+                                               "failures-by-object.md"}  # fmt: skip
     assert "| `vgn+turns+clearance` |" in readme.read_text()
     assert "| `--views` six\\|side\\|random | `six` |" in (out / "clear-scene-options.md").read_text()
     assert "`VGN_TURN_AVERAGE`" in (out / "configuration.md").read_text()

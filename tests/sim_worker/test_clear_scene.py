@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks import failures
 from service.clearance import FALLBACK_MARGIN, ClearanceConfig
 from sim_worker.camera import WORKSPACE_CENTRE
 from sim_worker.clutter import camera_views
@@ -472,4 +473,5 @@ def test_a_random_view_is_drawn_anew_for_every_look(tmp_path: Path, monkeypatch)
     # The baseline never answers below its threshold; a held object was closed on, by name.
     assert {row["fallback"] for row in rows} == {"0"}
     assert all(row["closed_on"] for row in rows if row["outcome"] == "success")
+    assert failures.main([str(results)]) == 0, "the run's failures can be listed by object"
     assert json.loads((results / "config.json").read_text())["views"] == "random"
