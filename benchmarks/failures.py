@@ -1,10 +1,11 @@
 """Which objects a clutter run's failed grasps were on: per object, the attempts that closed on it,
-how they failed and what answered them. A success rate hides whether its failures are spread over
+how they failed and what answered them; and, from ``rounds.csv`` beside it, the objects rounds left
+on the table and how those rounds ended. A success rate hides whether its failures are spread over
 the objects or piled on the few the hand cannot hold, which decide where effort goes.
 
-    python -m benchmarks.failures RUN_FOLDER [RUN_FOLDER ...]   # a table per folder holding grasps.csv
+    python -m benchmarks.failures RUN_FOLDER [RUN_FOLDER ...]   # the tables of each folder with grasps.csv
 
-``benchmarks.report`` puts the table of every ``docs/results/**/grasps.csv`` that names the objects
+``benchmarks.report`` puts the tables of every ``docs/results/**/grasps.csv`` that names the objects
 (``closed_on``, recorded since that column exists) on the benchmark page.
 """
 
@@ -34,7 +35,7 @@ class ObjectAttempts:
 
 
 def read_attempts(path: Path) -> list[dict[str, str]]:
-    """The rows of a clutter run's ``grasps.csv``."""
+    """The rows of a clutter run's ``grasps.csv`` (or ``rounds.csv``)."""
     with path.open(newline="") as handle:
         return list(csv.DictReader(handle))
 
@@ -93,6 +94,38 @@ def failures_table(rows: list[dict[str, str]]) -> str:
     return "\n".join(lines) + "\n" + summary
 
 
+def left_table(rounds: list[dict[str, str]], most: int = 6) -> str:
+    """A Markdown table of the ``most`` objects rounds left on the table most often, and how those
+    rounds ended (``ended`` of ``rounds.csv``): two objects no planner removes read alike in cleared,
+    while one planner's rounds end on two failures and the other's with nothing offered."""
+    left: dict[str, Counter[str]] = {}
+    for row in rounds:
+        for name in filter(None, row["left"].split("+")):
+            left.setdefault(name, Counter())[row["ended"].replace("_", " ")] += 1
+    if not left:
+        return f"No round of {len(rounds)} left an object on the table.\n"
+    ranked = sorted(left.items(), key=lambda item: (-item[1].total(), item[0]))[:most]
+    lines = [
+        "| object left on the table | rounds | how those rounds ended |",
+        "| --- | ---: | --- |",
+        *(
+            f"| {name.replace('|', '/')} | {endings.total()} | {_counts(endings)} |"
+            for name, endings in ranked
+        ),
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def folder_tables(folder: Path) -> str:
+    """The failures table of a folder's ``grasps.csv`` and, where ``rounds.csv`` is beside it, the
+    objects its rounds left."""
+    text = failures_table(read_attempts(folder / "grasps.csv"))
+    rounds = folder / "rounds.csv"
+    if rounds.is_file():
+        text += "\n" + left_table(read_attempts(rounds))
+    return text
+
+
 def run_title(folder: Path) -> str:
     """``planner, scenario, rounds, seed`` of a results folder, from its ``table.json`` and
     ``config.json`` where they are."""
@@ -113,7 +146,7 @@ def failures_page(results: Path) -> str:
     for path in sorted(results.rglob("grasps.csv")):
         rows = read_attempts(path)
         if names_objects(rows):
-            sections.append(f"**{run_title(path.parent)}**\n\n{failures_table(rows)}")
+            sections.append(f"**{run_title(path.parent)}**\n\n{folder_tables(path.parent)}")
     if not sections:
         return "No result folder holds a `grasps.csv` that names the objects closed on yet.\n"
     return "\n".join(sections)
@@ -141,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
             )
             status = 2
             continue
-        print(f"{run_title(folder)}\n\n{failures_table(rows)}")
+        print(f"{run_title(folder)}\n\n{folder_tables(folder)}")
     return status
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from benchmarks import failures
 from benchmarks.report import render_all
-from sim_worker.results import GRASP_COLUMNS
+from sim_worker.results import GRASP_COLUMNS, ROUND_COLUMNS
 
 
 def write_run(
@@ -55,6 +55,19 @@ def test_failures_are_counted_per_object_most_first(tmp_path: Path):
         "4 of 6 attempts failed, on 3 objects or groups; the two with the most failures hold 3 of them."
         in table
     )
+
+
+def test_the_objects_rounds_left_are_counted_with_how_those_rounds_ended(tmp_path: Path):
+    folder = write_run(tmp_path / "run", ATTEMPTS)
+    rounds = [("bowl+box", "failures"), ("bowl", "no_grasp"), ("", "cleared")]
+    with (folder / "rounds.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=ROUND_COLUMNS, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows({"left": left, "ended": ended} for left, ended in rounds)
+    text = failures.folder_tables(folder)
+    assert "| bowl | 2 | failures 1, no grasp 1 |" in text and "| box | 1 | failures 1 |" in text
+    assert text.index("| bowl | 2 |") < text.index("| box | 1 |"), "most often left first"
+    assert "No round of 1 left" in failures.left_table([{"left": "", "ended": "cleared"}])
 
 
 def test_the_page_lists_runs_that_name_objects_and_the_command_refuses_older_ones(tmp_path: Path, capsys):
