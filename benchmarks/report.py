@@ -267,7 +267,8 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("clearance-margin-", "What do a clearance check whose hand is grown by 4 mm instead of 2 (2 mm where 4 leaves "
                           "nothing) and the surface's pairs cleared on the fine cloud do to the default request and "
                           "to the antipodal baseline (the steps on the way carry a variant.md)?"),
-    ("seed-2-", "Does a second seed (another draw of scenes, the same command) agree with seed 1?"),
+    ("seed-", "Do other seeds (other draws of scenes, the same command; the seed opens the folder's name) "
+              "agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "
                        "do to the default request? (Runs that newer results replace in the README's table.)"),
     ("surface-facing-", "Do antipodal pairs judged by the points that face each jaw (their mean normal, as on a cup's "
