@@ -981,10 +981,12 @@ CurveKey = tuple[str, str, str]
 
 
 def operating_curves(results: Path) -> dict[CurveKey, list[CurvePoint]]:
-    """Every curve with two or more thresholds under ``results``, its points by threshold."""
+    """Every curve with two or more thresholds under ``results``, its points by threshold: the newest
+    run at each, of the shipped code, on the benchmark's default seed where the run records one (a
+    point of another draw of scenes would mix two draws in one curve)."""
     newest: dict[CurveKey, dict[float, CurvePoint]] = {}
     for folder, rows in clutter_runs(results):
-        if variant(folder):
+        if variant(folder) or run_seed(folder) not in (None, HEADLINE_SEED):
             continue
         for row in rows:
             if row.get("selection", "random") != "random" or row.get("success_rate") is None:

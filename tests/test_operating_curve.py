@@ -28,13 +28,15 @@ def test_curves_group_by_model_request_and_scenario_and_keep_the_newest(tmp_path
     )
     control = clutter_results(tmp_path / "control", [point(0.85, 40.0, 30.0)])
     (control / "variant.md").write_text("changed code\n")
+    newest = {**ROW["measured"], "time": "23:00:00"}
+    clutter_results(tmp_path / "seed-3", [point(0.9, 99.0, 10.0, measured=newest)], settings="seed 3")
     curves = report.operating_curves(tmp_path)
     assert list(curves) == [(ROW["model"], "vgn", "pile-5"), (ROW["model"], "vgn", "pile-5, depth noise")], (
         "one threshold (the other model, the other request) is no curve; other sensing is another curve"
     )
     points = curves[ROW["model"], "vgn", "pile-5"]
     assert [p.threshold for p in points] == [0.8, 0.9], "the variant's 0.85 is left out"
-    assert points[1].row["success_rate"] == 74.0, "the newest run at a threshold"
+    assert points[1].row["success_rate"] == 74.0, "the newest run at a threshold, of the default seed"
 
     page = report.curves_page(tmp_path)
     assert f"#### `{ROW['model']}`, `vgn`, pile-5" in page
