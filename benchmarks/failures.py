@@ -12,12 +12,13 @@ the objects or piled on the few the hand cannot hold, which decide where effort 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from sim_worker.results import read_csv
 
 #: How an attempt that closed on no object is listed.
 NO_OBJECT = "(no object between the fingers)"
@@ -32,12 +33,6 @@ class ObjectAttempts:
     failures: int = 0
     outcomes: Counter[str] = field(default_factory=Counter)
     answers: Counter[str] = field(default_factory=Counter)
-
-
-def read_attempts(path: Path) -> list[dict[str, str]]:
-    """The rows of a clutter run's ``grasps.csv`` (or ``rounds.csv``)."""
-    with path.open(newline="") as handle:
-        return list(csv.DictReader(handle))
 
 
 def names_objects(rows: list[dict[str, str]]) -> bool:
@@ -116,37 +111,35 @@ def left_table(rounds: list[dict[str, str]], most: int = 6) -> str:
     return "\n".join(lines) + "\n"
 
 
-def folder_tables(folder: Path) -> str:
-    """The failures table of a folder's ``grasps.csv`` and, where ``rounds.csv`` is beside it, the
-    objects its rounds left."""
-    text = failures_table(read_attempts(folder / "grasps.csv"))
-    rounds = folder / "rounds.csv"
-    if rounds.is_file():
-        text += "\n" + left_table(read_attempts(rounds))
-    return text
+def folder_tables(folder: Path, attempts: list[dict[str, str]]) -> str:
+    """The failures table of a folder's ``attempts`` (its ``grasps.csv``) and, where ``rounds.csv``
+    is beside it, the objects its rounds left."""
+    text = failures_table(attempts)
+    rounds = read_csv(folder / "rounds.csv")
+    return text + "\n" + left_table(rounds) if rounds else text
 
 
 def run_title(folder: Path) -> str:
-    """``planner, scenario, rounds, seed`` of a results folder, from its ``table.json`` and
-    ``config.json`` where they are."""
-    parts = [folder.name]
+    """The folder's name with the planner, scenario, rounds and measuring date of its ``table.json``
+    where there is one."""
     table = folder / "table.json"
-    if table.is_file():
-        row = json.loads(table.read_text())[0]
-        parts = [f"`{folder.name}`: {row['planner']}, {row['scenario']}, {row['rounds']} rounds"]
-        measured = row.get("measured") or {}
-        if measured.get("date"):
-            parts.append(f"measured {measured['date']} on {measured.get('cpu', 'an unrecorded CPU')}")
-    return ", ".join(parts)
+    if not table.is_file():
+        return folder.name
+    row = json.loads(table.read_text())[0]
+    title = f"`{folder.name}`: {row['planner']}, {row['scenario']}, {row['rounds']} rounds"
+    measured = row.get("measured") or {}
+    if measured.get("date"):
+        title += f", measured {measured['date']} on {measured.get('cpu', 'an unrecorded CPU')}"
+    return title
 
 
 def failures_page(results: Path) -> str:
     """The table of every results folder under ``results`` whose ``grasps.csv`` names the objects."""
     sections = []
     for path in sorted(results.rglob("grasps.csv")):
-        rows = read_attempts(path)
+        rows = read_csv(path)
         if names_objects(rows):
-            sections.append(f"**{run_title(path.parent)}**\n\n{folder_tables(path.parent)}")
+            sections.append(f"**{run_title(path.parent)}**\n\n{folder_tables(path.parent, rows)}")
     if not sections:
         return "No result folder holds a `grasps.csv` that names the objects closed on yet.\n"
     return "\n".join(sections)
@@ -166,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{folder}: no grasps.csv there", file=sys.stderr)
             status = 2
             continue
-        rows = read_attempts(path)
+        rows = read_csv(path)
         if not names_objects(rows):
             print(
                 f"{folder}: its grasps.csv predates the closed_on column; run the benchmark again",
@@ -174,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
             )
             status = 2
             continue
-        print(f"{run_title(folder)}\n\n{folder_tables(folder)}")
+        print(f"{run_title(folder)}\n\n{folder_tables(folder, rows)}")
     return status
 
 

@@ -159,6 +159,13 @@ def variant(folder: Path) -> str:
     return " ".join(path.read_text().split()).rstrip(".") if path.is_file() else ""
 
 
+def shipped_code_on_default_seed(folder: Path) -> bool:
+    """Whether a results folder measured the shipped code (no ``variant.md``: not a control or an
+    experiment on changed code) on the benchmark's default seed where the run records one (not a
+    repeat on another draw of scenes): what the README's table and the operating curves show."""
+    return not variant(folder) and run_seed(folder) in (None, HEADLINE_SEED)
+
+
 def row_measured(row: dict[str, Any], folder: Path) -> dict[str, Any] | None:
     """When and where a row was measured: its own record, else the folder's ``measured.json``."""
     return row.get("measured") or sidecar(folder)
@@ -414,10 +421,8 @@ def headline_cells(results: Path) -> tuple[dict[tuple[str, str], HeadlineCell], 
     planners: list[str] = []
     shipped, threshold = shipped_model_id(), shipped_threshold()
     for folder, rows in clutter_runs(results):
-        if variant(folder):
-            continue  # a control or an experiment on changed code: not what the package does
-        if run_seed(folder) not in (None, HEADLINE_SEED):
-            continue  # a repeat on another draw of scenes
+        if not shipped_code_on_default_seed(folder):
+            continue
         for row in rows:
             if row.get("selection", "random") != "random" or row.get("success_rate") is None:
                 continue
@@ -986,7 +991,7 @@ def operating_curves(results: Path) -> dict[CurveKey, list[CurvePoint]]:
     point of another draw of scenes would mix two draws in one curve)."""
     newest: dict[CurveKey, dict[float, CurvePoint]] = {}
     for folder, rows in clutter_runs(results):
-        if variant(folder) or run_seed(folder) not in (None, HEADLINE_SEED):
+        if not shipped_code_on_default_seed(folder):
             continue
         for row in rows:
             if row.get("selection", "random") != "random" or row.get("success_rate") is None:

@@ -120,7 +120,8 @@ def _csv_text(columns: list[str], rows: list[dict[str, Any]]) -> str:
     return buffer.getvalue()
 
 
-def _read_csv(path: Path) -> list[dict[str, str]]:
+def read_csv(path: Path) -> list[dict[str, str]]:
+    """The rows of a results CSV (``rounds.csv``, ``grasps.csv``); none where the file is missing."""
     if not path.exists():
         return []
     with path.open(newline="") as stream:
@@ -135,10 +136,10 @@ class ResultsFolder:
         self.path.mkdir(parents=True, exist_ok=True)
         check_settings(self.path / "config.json", config, may_change=("rounds",))
         remove_stale_temporaries(self.path)
-        self.rounds = _read_csv(self.path / "rounds.csv")
+        self.rounds = read_csv(self.path / "rounds.csv")
         finished = {row["round_id"] for row in self.rounds}
         # Rows of a round that never finished are dropped: that round runs again.
-        self.grasps = [row for row in _read_csv(self.path / "grasps.csv") if row["round_id"] in finished]
+        self.grasps = [row for row in read_csv(self.path / "grasps.csv") if row["round_id"] in finished]
 
     def finished_rounds(self) -> set[int]:
         """Round ids already committed: a resumed run skips them."""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from benchmarks import failures
 from benchmarks.report import render_all
-from sim_worker.results import GRASP_COLUMNS, ROUND_COLUMNS
+from sim_worker.results import GRASP_COLUMNS, ROUND_COLUMNS, read_csv
 
 
 def write_run(
@@ -40,7 +40,7 @@ ATTEMPTS = [
 
 
 def test_failures_are_counted_per_object_most_first(tmp_path: Path):
-    rows = failures.read_attempts(write_run(tmp_path / "run", ATTEMPTS) / "grasps.csv")
+    rows = read_csv(write_run(tmp_path / "run", ATTEMPTS) / "grasps.csv")
     entries = failures.by_object(rows)
     assert [(entry.name, entry.failures, entry.attempts) for entry in entries] == [
         ("bowl", 2, 2), ("box", 1, 2), (failures.NO_OBJECT, 1, 1), ("cup+box", 0, 1),
@@ -64,7 +64,7 @@ def test_the_objects_rounds_left_are_counted_with_how_those_rounds_ended(tmp_pat
         writer = csv.DictWriter(handle, fieldnames=ROUND_COLUMNS, extrasaction="ignore")
         writer.writeheader()
         writer.writerows({"left": left, "ended": ended} for left, ended in rounds)
-    text = failures.folder_tables(folder)
+    text = failures.folder_tables(folder, read_csv(folder / "grasps.csv"))
     assert "| bowl | 2 | failures 1, no grasp 1 |" in text and "| box | 1 | failures 1 |" in text
     assert text.index("| bowl | 2 |") < text.index("| box | 1 |"), "most often left first"
     assert "No round of 1 left" in failures.left_table([{"left": "", "ended": "cleared"}])
