@@ -340,18 +340,21 @@ class PlanningService:
 
         found_pairs: dict[AntipodalConfig, list[Grasp]] = {}
 
-        def checked_pairs(config: AntipodalConfig, grip_grid: np.ndarray | None = grid) -> Checked:
-            # The surface's pairs, cleared against the fine cloud they were found on as well as the
-            # grid's surface: the grid's coarser surface misses what brushes past the fingers.
-            if config not in found_pairs:
-                found_pairs[config] = plan_antipodal(fine_cloud(), workspace_pose, config, session_hand)
-            checked = checked_of(found_pairs[config], grip_grid)
+        def cleared_on_fine_cloud(checked: Checked) -> Checked:
+            # Cleared against the fine cloud as well as the grid's surface: the grid's coarser surface
+            # misses what brushes past the fingers.
             if surface is None:
                 return checked
-            pairs = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
-                             workspace_size, margin)  # fmt: skip
-            dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(pairs)
-            return replace(checked, grasps=pairs, clearance_dropped=dropped)
+            kept = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
+                            workspace_size, margin)  # fmt: skip
+            dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(kept)
+            return replace(checked, grasps=kept, clearance_dropped=dropped)
+
+        def checked_pairs(config: AntipodalConfig, grip_grid: np.ndarray | None = grid) -> Checked:
+            # The surface's pairs, cleared against the fine cloud they were found on.
+            if config not in found_pairs:
+                found_pairs[config] = plan_antipodal(fine_cloud(), workspace_pose, config, session_hand)
+            return cleared_on_fine_cloud(checked_of(found_pairs[config], grip_grid))
 
         def answer() -> tuple[Checked, str, float, bool]:
             """The checked grasps, the model and threshold that answer, and whether the threshold fell back."""
@@ -359,8 +362,9 @@ class PlanningService:
             checked = checked_pairs(antipodal_config(ranked)) if baseline else checked_of(grasps)
             if faces is not None and checked.grasps:
                 checked, answering = self._opposed(
-                    checked, answering, faces, fine_cloud, session_hand, checked_pairs, ranked
-                )
+                    checked, answering, faces, fine_cloud, session_hand, checked_pairs, ranked,
+                    cleared_on_fine_cloud,
+                )  # fmt: skip
                 if answering == "antipodal":  # the surface's pairs answer, at the baseline's threshold
                     threshold_now = antipodal_config(ranked).threshold
             floor = self.settings.fallback_threshold
@@ -387,6 +391,8 @@ class PlanningService:
                     checked, answering = replace(pairs, grasps=narrow), "antipodal"
                 else:
                     checked = checked_of(network.detect(observed, output, voxel_size, workspace_pose, lower))
+                    if cloud is not None:  # read for the pairs: it clears the network's grasps too
+                        checked = cleared_on_fine_cloud(checked)
             return checked, answering, threshold_now, fallback
 
         checked, answering, answered_threshold, fallback = answer()
@@ -422,13 +428,15 @@ class PlanningService:
         hand: GripperDescription,
         checked_pairs: Callable[[AntipodalConfig], Checked],
         query: GraspQuery,
+        cleared_on_fine_cloud: Callable[[Checked], Checked],
     ) -> tuple[Checked, str]:
         """The antipodal check on checked VGN grasps. In turn, the first of these that is not empty
         answers: the VGN grasps whose pads meet opposed faces of the grid's surface (``faces``); the
         surface's antipodal pairs that pass every check and meet opposed faces of the grid's surface
         too; the VGN grasps whose pads meet opposed faces of the fine cloud; the other checked pairs;
-        the VGN grasps as they were. Pairs answer narrow ones first (``_narrow_first``). Returns the
-        grasps and the model that answers."""
+        the VGN grasps as they were. Pairs answer narrow ones first (``_narrow_first``). Past the
+        first, the fine cloud has been read, so the VGN grasps are cleared against it as the pairs are
+        (``cleared_on_fine_cloud``). Returns the grasps and the model that answers."""
         kept = self._opposed_on_grid(checked.grasps, faces, hand)
         if kept:
             return replace(checked, grasps=kept), model
@@ -436,6 +444,7 @@ class PlanningService:
         kept = self._opposed_on_grid(pairs.grasps, faces, hand)
         if kept:
             return replace(pairs, grasps=self._narrow_first(kept, hand)), "antipodal"
+        checked = cleared_on_fine_cloud(checked)
         fine_cone = math.radians(self.settings.antipodal_check_angle)
         kept = opposed_grasps(checked.grasps, fine_cloud(), hand, fine_cone)
         if kept:
