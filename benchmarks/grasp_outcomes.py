@@ -18,9 +18,9 @@ several cones of the antipodal check (``--antipodal-angles``), the same for the 
 checks, judged by the faces their pads meet on the fine cloud. With ``collect --pairs N`` each look
 also executes up to N of the surface's antipodal pairs (the service's answer where the network's
 grasps fail the checks), and the report ends with how often a random grasp of each look's answer
-succeeds under each order of the antipodal check's answers (``TIER_ORDERS``) and with the clearance
-check's hand grown by each of several margins. Choose settings on *training* objects; benchmark on
-held-out ones.
+succeeds under each order of the antipodal check's answers (``TIER_ORDERS``), with how the network's
+grasps of each answer fare when cleared on the fine cloud too, and with the clearance check's hand
+grown by each of several margins. Choose settings on *training* objects; benchmark on held-out ones.
 """
 
 from __future__ import annotations
@@ -219,6 +219,8 @@ def report(args: argparse.Namespace) -> int:
         with_pairs = [look for look in looks if "pairs" in look]
         pairs_report(with_pairs, voxel_size, args.pair_shares)
         print()
+        fine_clearance_report(with_pairs, voxel_size)
+        print()
         margin_report(with_pairs, voxel_size, args.clearance_margins)
     return 0
 
@@ -287,11 +289,12 @@ def antipodal_report(
         _cone_row(f"{angle:10.0f}", keeps, [held for *_, held in judged])
 
 
-#: The suffix of an answer of pairs cleared on the grid's surface alone, not on the fine cloud as well.
+#: The suffix of an answer cleared on the grid's surface alone, not on the fine cloud as well.
 GRID_CLEARED = " (grid-cleared)"
 #: The antipodal check's answers in turn, the first that is not empty answering (``pairs_report``):
-#: where some network grasp passes the clearance and grip checks, and where none does (the fallback);
-#: and whether answering pairs are narrowed (``VGN_NARROW_PAIR_SHARE``). The first is the service's.
+#: where some network grasp passes the clearance and grip checks (then the fallback's, where none of
+#: those answers), and where none does (the fallback); and whether answering pairs are narrowed
+#: (``VGN_NARROW_PAIR_SHARE``). The first is the service's.
 TIER_ORDERS = {
     "the service's order": (
         ("grid", "grid pairs", "cloud", "pairs", "checked"),
@@ -305,12 +308,31 @@ TIER_ORDERS = {
         True,
     ),
     "the antipodal baseline: its checked pairs alone": (("pairs",), ("pairs",), False),
-    "the pairs cleared on the grid's surface alone": (
-        ("grid", "grid pairs" + GRID_CLEARED, "cloud", "pairs" + GRID_CLEARED, "checked"),
-        ("every grid pair" + GRID_CLEARED, "every pair" + GRID_CLEARED, "lower"),
+    "the network's grasps cleared on the grid's surface alone": (
+        ("grid", "grid pairs", "cloud" + GRID_CLEARED, "pairs", "checked" + GRID_CLEARED),
+        ("every grid pair", "every pair", "lower" + GRID_CLEARED),
+        True,
+    ),
+    "everything cleared on the grid's surface alone": (
+        (
+            "grid",
+            "grid pairs" + GRID_CLEARED,
+            "cloud" + GRID_CLEARED,
+            "pairs" + GRID_CLEARED,
+            "checked" + GRID_CLEARED,
+        ),
+        ("every grid pair" + GRID_CLEARED, "every pair" + GRID_CLEARED, "lower" + GRID_CLEARED),
         True,
     ),
 }
+
+
+def _order(answers: dict[str, tuple[str, np.ndarray]], checked: tuple[str, ...], fallback: tuple[str, ...]
+           ) -> tuple[str, ...]:  # fmt: skip
+    """The answers a look goes through in turn: where some network grasp passes the clearance and grip
+    checks on the grid, ``checked`` and then, where none of those answers, the service's fallback
+    ``fallback``; else ``fallback``."""
+    return checked + fallback if len(answers["checked" + GRID_CLEARED][1]) else fallback
 
 
 def pairs_report(
@@ -334,13 +356,13 @@ def pairs_report(
         held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
 
         for name, (checked, fallback, narrowed) in TIER_ORDERS.items():
-            order = checked if len(answers["checked"][1]) else fallback
+            order = _order(answers, checked, fallback)
             tier, value = _answer(look, answers, held, order, share if narrowed else None)
             per_order[name].append(value)
             answered_by[name][tier or "nothing"] = answered_by[name].get(tier or "nothing", 0) + 1
         checked, fallback, _ = next(iter(TIER_ORDERS.values()))
         for limit in narrow:
-            order = checked if len(answers["checked"][1]) else fallback
+            order = _order(answers, checked, fallback)
             narrow[limit].append(_answer(look, answers, held, order, limit)[1])
     print(f"{len(looks)} looks with the surface's pairs executed; a random grasp of each look's answer:")
     print("order | looks answered | success % per look | answered by | against the service's order")
@@ -367,6 +389,43 @@ def pairs_report(
         print(f"{label} | {group.sum()} | {_percent(list(held_pairs))} | {_percent(list(slipped))}")
 
 
+def fine_clearance_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
+    """Print, for the network's grasps of each answer of ``_tier_answers`` (cleared on the grid's
+    surface, as collected), how many the clearance check on the fine cloud keeps and drops and how
+    often each group succeeded. The service clears every answer but "grid" so, where it has read the
+    fine cloud anyway; "grid" is shown for comparison."""
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
+                            for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
+    groups = {
+        "grid (not cleared so)": [],
+        "checked, past the grid's faces": [],
+        "cloud": [],
+        "lower, below the operating threshold": [],
+    }
+    for look in looks:
+        answers = _tier_answers(look, voxel_size, grid_cone, fine_cone)
+        fine = {name: set(answers[name][1]) for name in ("checked", "cloud", "lower")}
+        fine["grid"] = fine["checked"]  # the grid's answer is of the checked grasps
+        checked = answers["checked" + GRID_CLEARED][1]
+        rows = {
+            "grid (not cleared so)": ("grid", answers["grid"][1]),
+            "checked, past the grid's faces": ("checked", np.setdiff1d(checked, answers["grid"][1])),
+            "cloud": ("cloud", answers["cloud" + GRID_CLEARED][1]),
+            "lower, below the operating threshold": ("lower", np.setdiff1d(answers["lower" + GRID_CLEARED][1], checked)),
+        }  # fmt: skip
+        for label, (name, indices) in rows.items():
+            kept = np.array([index in fine[name] for index in indices], dtype=bool)
+            groups[label].append((look["outcomes"][indices] == success, kept))
+    print("the network's grasps of each answer, cleared on the fine cloud too (the service's 4 mm hand):")
+    print("answer | grasps | success % | kept | success % | dropped | success %")
+    for label, judged in groups.items():
+        held = np.concatenate([h for h, _ in judged]) if judged else np.zeros(0, bool)
+        kept = np.concatenate([k for _, k in judged]) if judged else np.zeros(0, bool)
+        print(f"{label} | {len(held)} | {_percent(list(held))} | {kept.sum()} | {_percent(list(held[kept]))} | "
+              f"{(~kept).sum()} | {_percent(list(held[~kept]))}")  # fmt: skip
+
+
 def margin_report(
     looks: list[dict[str, np.ndarray]], voxel_size: float, margins: list[float], repeats: int = 5000
 ) -> None:
@@ -378,7 +437,7 @@ def margin_report(
                             for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
     share = Settings.model_fields["narrow_pair_share"].default
     success = OUTCOMES.index(Outcome.SUCCESS)
-    orders = {"on the grid's surface": TIER_ORDERS["the pairs cleared on the grid's surface alone"],
+    orders = {"on the grid's surface": TIER_ORDERS["everything cleared on the grid's surface alone"],
               "on the fine cloud too": next(iter(TIER_ORDERS.values()))}  # fmt: skip
     values: dict[tuple[float, str], list[float]] = {}
     for look in looks:
@@ -386,7 +445,7 @@ def margin_report(
             answers = _tier_answers(look, voxel_size, grid_cone, fine_cone, ClearanceConfig(margin=margin))
             held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
             for label, (checked, fallback, narrowed) in orders.items():
-                order = checked if len(answers["checked"][1]) else fallback
+                order = _order(answers, checked, fallback)
                 value = _answer(look, answers, held, order, share if narrowed else None)[1]
                 values.setdefault((margin, label), []).append(value)
     reference = np.array(values[margins[0], "on the grid's surface"])
@@ -442,8 +501,9 @@ def _tier_answers(
     ("grid pairs"); every clearance-checked pair ("every pair", "every grid pair"); and the network's
     grasps that pass both checks down to the fallback floor ("lower"). The clearance check is replayed
     with ``clearance`` on the grid's surface, as collected (so a margin below the collection's keeps
-    what the collection kept); the service clears its pairs on the fine cloud as well, so each answer
-    of pairs does too, and is also given on the grid's surface alone, :data:`GRID_CLEARED` appended."""
+    what the collection kept). The service clears its pairs on the fine cloud as well, and the
+    network's grasps wherever it has read that cloud (every answer but "grid"), so each of those
+    answers does too, and is also given on the grid's surface alone, :data:`GRID_CLEARED` appended."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
     support = support_height(grid, voxel_size)
@@ -476,14 +536,19 @@ def _tier_answers(
         "every pair": every_pair,
         "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
     }
-    fine_clear = cleared(pairs, look["cloud"][:, :3].astype(np.float64))
+    fine_cloud = look["cloud"][:, :3].astype(np.float64)
+    pairs_fine_clear, grasps_fine_clear = cleared(pairs, fine_cloud), cleared(grasps, fine_cloud)
+    network_answers = {
+        "checked": checked,
+        "cloud": opposed(grasps, checked, look["cloud"], fine_cone),
+        "lower": gripping(grasps, np.flatnonzero(grasps_clear)),
+    }
     return {
-        "checked": ("outcomes", checked),
         "grid": ("outcomes", opposed(grasps, checked, faces, grid_cone)),
-        "cloud": ("outcomes", opposed(grasps, checked, look["cloud"], fine_cone)),
-        **{name: ("pair_outcomes", rows[fine_clear[rows]]) for name, rows in pair_answers.items()},
+        **{name: ("outcomes", rows[grasps_fine_clear[rows]]) for name, rows in network_answers.items()},
+        **{name + GRID_CLEARED: ("outcomes", rows) for name, rows in network_answers.items()},
+        **{name: ("pair_outcomes", rows[pairs_fine_clear[rows]]) for name, rows in pair_answers.items()},
         **{name + GRID_CLEARED: ("pair_outcomes", rows) for name, rows in pair_answers.items()},
-        "lower": ("outcomes", gripping(grasps, np.flatnonzero(grasps_clear))),
     }
 
 

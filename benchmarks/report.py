@@ -274,6 +274,9 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("clearance-margin-", "What do a clearance check whose hand is grown by 4 mm instead of 2 (2 mm where 4 leaves "
                           "nothing) and the surface's pairs cleared on the fine cloud do to the default request and "
                           "to the antipodal baseline (the steps on the way carry a variant.md)?"),
+    ("fine-clearance-", "What does clearing the network's grasps against the fine cloud as well, wherever a "
+                        "request has read it anyway (the antipodal check past the grid's faces, the fallback), do "
+                        "to the default request?"),
     ("seed-", "Do other seeds (other draws of scenes, the same command; the seed opens the folder's name) "
               "agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "

@@ -9,7 +9,8 @@ The hand is the session's gripper description (``vgn_contract.gripper_descriptio
 ``franka``), every part a box in the grasp frame (docs/conventions.md), each swept box tested
 exactly for the points inside its bounding box. Network grasps are cleared against the coarse
 TSDF's zero crossings (``SceneVolume.surface_points``, far cheaper than ``/cloud``); the
-surface's antipodal pairs, found on the fine cloud, against that cloud."""
+surface's antipodal pairs, found on the fine cloud, against that cloud too, and so are the network's
+grasps of a request that has read it anyway."""
 
 from __future__ import annotations
 

@@ -244,6 +244,43 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
     assert grips_antipodally(cloud, positions, rotations, default_gripper(), np.radians(angle)).all()
 
 
+def test_the_networks_grasps_answered_once_the_fine_cloud_is_read_are_cleared_against_it():
+    """Beside the box stands a plate 3 mm thick, where the fingers of grasps across the box's 6 cm side
+    come down: the grid's 7.5 mm voxels barely show it, the fine cloud does. With the grid's cone at half
+    a degree the network's grasps are judged on the fine cloud's faces (a cone of 89 degrees keeps them);
+    the fine cloud read, it clears them as it clears the surface's pairs, so none answered brushes the
+    plate, while the grid's surface alone would have let some through."""
+    box, plate = BoxScene(), BoxScene(lower=(0.14, 0.19, TABLE_Z), upper=(0.16, 0.193, TABLE_Z + 0.04))
+
+    def depth(pose: np.ndarray) -> np.ndarray:
+        hits = [np.where(d > 0, d, np.inf) for d in (box.depth(pose), plate.depth(pose))]
+        nearest = np.minimum(*hits)
+        return np.where(np.isfinite(nearest), nearest, 0.0).astype(np.float32)
+
+    query = GraspQuery(threshold=0.5)
+    answers = {}
+    for check in (False, True):
+        settings = Settings(model=PACKAGED_MODEL, api_key=None, antipodal_check=check,
+                            antipodal_check_grid_angle=0.5, antipodal_check_angle=89.0)  # fmt: skip
+        service = PlanningService.from_settings(settings)
+        try:
+            session = service.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
+            for pose in circle_views():
+                service.add_frame(session, depth(pose), pose)
+            answers[check] = service.plan(session, query)
+            cloud, grid, network = service.cloud(session), service.grid(session), service.planner.model_id
+        finally:
+            service.close()
+
+    def brushing(grasps: list[Grasp]) -> int:
+        return len(grasps) - len(clear_of(grasps, cloud[:, :3], grid, VOXEL, np.eye(4), SIZE))
+
+    grid_cleared, answer = answers[False], answers[True]
+    assert grid_cleared.model == network and brushing(grid_cleared.grasps) > 0  # the grid's surface misses it
+    assert answer.model == network and answer.grasps and brushing(answer.grasps) == 0
+    assert {tuple(g.position) for g in answer.grasps} < {tuple(g.position) for g in grid_cleared.grasps}
+
+
 def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cloud_is_asked():
     """The network's grasps on the box, turned 45 degrees about their approach, close on its edges (those
     whose pads still meet opposed faces aside): their pads meet no opposed faces of the grid's surface
@@ -282,7 +319,7 @@ def test_the_surfaces_pairs_on_the_grids_opposed_faces_answer_before_the_fine_cl
 
         unchecked = Checked(turned, clearance_dropped=0, grip_dropped=0, replaced=0)
         answer, model = service._opposed(unchecked, "vgn", faces, lambda: cloud, default_gripper(), checked_pairs,
-                                         GraspQuery())  # fmt: skip
+                                         GraspQuery(), lambda checked: checked)  # fmt: skip
         pairs = checked_pairs(antipodal_config(GraspQuery())).grasps
     finally:
         service.close()

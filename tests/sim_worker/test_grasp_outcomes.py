@@ -66,14 +66,18 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     for table in rows:
         assert len(table) == 2 and int(table[0][1]) <= int(table[1][1])
     # The network-first orders answer the same looks (they differ in what answers), each compared with
-    # the service's; the baseline answers only where a checked pair exists, so no more looks; pairs
+    # the service's; the baseline answers only where a checked pair exists, so no more looks; grasps
     # cleared on the grid's surface alone are a superset of those cleared on the fine cloud too.
     orders = report.split("a random grasp of each look's answer:")[1].split("\n\n")[0].splitlines()[2:]
-    assert len(orders) == 5, report
-    assert len({line.split("|")[1] for line in orders[:3]}) == 1, report
-    assert int(orders[3].split("|")[1]) <= int(orders[0].split("|")[1])
-    assert int(orders[4].split("|")[1]) >= int(orders[0].split("|")[1])
+    assert len(orders) == 6, report
+    answered = [int(line.split("|")[1]) for line in orders]
+    assert len(set(answered[:3])) == 1, report
+    assert answered[3] <= answered[0] <= answered[4] <= answered[5]
     assert all("paired over" in line.split("|")[4] for line in orders[1:]), report
+    # The network's grasps of each answer, split by the fine cloud's clearance check into kept and dropped.
+    fine = report.split("answer | grasps | success % | kept")[1].split("\n\n")[0].strip().splitlines()[1:]
+    assert len(fine) == 4, report
+    assert all(int(row[1]) == int(row[3]) + int(row[5]) for row in (line.split("|") for line in fine))
     # Each margin of the clearance check, its pairs cleared on the grid's surface and on the fine cloud
     # too, against the first margin on the grid's surface (itself: nothing differs). A wider hand
     # answers no more looks.
