@@ -31,6 +31,10 @@ _CHUNK = 1 << 20
 #: Where the clearance check's default margin leaves a look no grasp at all, the service answers with
 #: what clears a hand grown by this much less rather than nothing (docs/concepts.md, "The clearance check").
 FALLBACK_MARGIN = 0.002
+#: Where the network's grasps are cleared on the fine cloud too, this many of its points (2.5 mm apart
+#: where the grid's crossings lie 7.5 mm apart) veto one: with the grid's two, depth noise scattered
+#: over the fine cloud vetoes grasps by the dozen (docs/concepts.md, "The clearance check").
+NETWORK_FINE_MIN_POINTS = 10
 
 
 @dataclass(frozen=True)

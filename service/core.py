@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
 from service.checks import Checked, check_grasps, clear_of
-from service.clearance import FALLBACK_MARGIN, ClearanceConfig
+from service.clearance import FALLBACK_MARGIN, NETWORK_FINE_MIN_POINTS, ClearanceConfig
 from service.cloud_fusion import CloudFusion
 from service.depth import decode_depth
 from service.errors import InvalidInput, ModelNotReady, SessionNotFound
@@ -340,13 +340,14 @@ class PlanningService:
 
         found_pairs: dict[AntipodalConfig, list[Grasp]] = {}
 
-        def cleared_on_fine_cloud(checked: Checked) -> Checked:
+        def cleared_on_fine_cloud(checked: Checked, network: bool = True) -> Checked:
             # Cleared against the fine cloud as well as the grid's surface: the grid's coarser surface
-            # misses what brushes past the fingers.
+            # misses what brushes past the fingers. The network's grasps take more of its points to veto.
             if surface is None:
                 return checked
+            hand = replace(margin, min_points=NETWORK_FINE_MIN_POINTS) if network else margin
             kept = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
-                            workspace_size, margin)  # fmt: skip
+                            workspace_size, hand)  # fmt: skip
             dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(kept)
             return replace(checked, grasps=kept, clearance_dropped=dropped)
 
@@ -354,7 +355,7 @@ class PlanningService:
             # The surface's pairs, cleared against the fine cloud they were found on.
             if config not in found_pairs:
                 found_pairs[config] = plan_antipodal(fine_cloud(), workspace_pose, config, session_hand)
-            return cleared_on_fine_cloud(checked_of(found_pairs[config], grip_grid))
+            return cleared_on_fine_cloud(checked_of(found_pairs[config], grip_grid), network=False)
 
         def answer() -> tuple[Checked, str, float, bool]:
             """The checked grasps, the model and threshold that answer, and whether the threshold fell back."""
