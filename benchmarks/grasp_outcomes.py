@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import io
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ from scipy.spatial.transform import Rotation
 from client.connect import connect
 from service.baseline import grips_antipodally
 from service.checks import SUPPORT_CONTACT_TOLERANCE, contact_tolerances
-from service.clearance import ClearanceConfig, approach_is_clear
+from service.clearance import NETWORK_FINE_MIN_POINTS, ClearanceConfig, approach_is_clear
 from service.grid_surface import grid_surface_cloud, grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
 from service.launch.embedded import EmbeddedService
@@ -219,7 +220,7 @@ def report(args: argparse.Namespace) -> int:
         with_pairs = [look for look in looks if "pairs" in look]
         pairs_report(with_pairs, voxel_size, args.pair_shares)
         print()
-        fine_clearance_report(with_pairs, voxel_size)
+        fine_clearance_report(with_pairs, voxel_size, args.fine_min_points)
         print()
         margin_report(with_pairs, voxel_size, args.clearance_margins)
     return 0
@@ -389,40 +390,45 @@ def pairs_report(
         print(f"{label} | {group.sum()} | {_percent(list(held_pairs))} | {_percent(list(slipped))}")
 
 
-def fine_clearance_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
+def fine_clearance_report(
+    looks: list[dict[str, np.ndarray]], voxel_size: float, min_points: list[int]
+) -> None:
     """Print, for the network's grasps of each answer of ``_tier_answers`` (cleared on the grid's
     surface, as collected), how many the clearance check on the fine cloud keeps and drops and how
-    often each group succeeded. The service clears every answer but "grid" so, where it has read the
-    fine cloud anyway; "grid" is shown for comparison."""
+    often each group succeeded, with each of ``min_points`` of its points vetoing a grasp. The service
+    clears every answer but "grid" so, where it has read the fine cloud anyway; "grid" is shown for
+    comparison."""
     success = OUTCOMES.index(Outcome.SUCCESS)
     grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
                             for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
-    groups = {
-        "grid (not cleared so)": [],
-        "checked, past the grid's faces": [],
-        "cloud": [],
-        "lower, below the operating threshold": [],
-    }
+    labels = (
+        "grid (not cleared so)",
+        "checked, past the grid's faces",
+        "cloud",
+        "lower, below the operating threshold",
+    )
+    groups: dict[tuple[int, str], list[tuple[np.ndarray, np.ndarray]]] = {}
     for look in looks:
-        answers = _tier_answers(look, voxel_size, grid_cone, fine_cone)
-        fine = {name: set(answers[name][1]) for name in ("checked", "cloud", "lower")}
-        fine["grid"] = fine["checked"]  # the grid's answer is of the checked grasps
-        checked = answers["checked" + GRID_CLEARED][1]
-        rows = {
-            "grid (not cleared so)": ("grid", answers["grid"][1]),
-            "checked, past the grid's faces": ("checked", np.setdiff1d(checked, answers["grid"][1])),
-            "cloud": ("cloud", answers["cloud" + GRID_CLEARED][1]),
-            "lower, below the operating threshold": ("lower", np.setdiff1d(answers["lower" + GRID_CLEARED][1], checked)),
-        }  # fmt: skip
-        for label, (name, indices) in rows.items():
-            kept = np.array([index in fine[name] for index in indices], dtype=bool)
-            groups[label].append((look["outcomes"][indices] == success, kept))
-    print("the network's grasps of each answer, cleared on the fine cloud too (the service's 4 mm hand):")
-    print("answer | grasps | success % | kept | success % | dropped | success %")
-    for label, judged in groups.items():
-        held = np.concatenate([h for h, _ in judged]) if judged else np.zeros(0, bool)
-        kept = np.concatenate([k for _, k in judged]) if judged else np.zeros(0, bool)
-        print(f"{label} | {len(held)} | {_percent(list(held))} | {kept.sum()} | {_percent(list(held[kept]))} | "
+        for points in min_points:
+            answers = _tier_answers(look, voxel_size, grid_cone, fine_cone, network_fine_min_points=points)
+            fine = {name: set(answers[name][1]) for name in ("checked", "cloud", "lower")}
+            checked, grid = answers["checked" + GRID_CLEARED][1], answers["grid"][1]
+            rows = {
+                labels[0]: (fine["checked"], grid),  # the grid's answer is of the checked grasps
+                labels[1]: (fine["checked"], np.setdiff1d(checked, grid)),
+                labels[2]: (fine["cloud"], answers["cloud" + GRID_CLEARED][1]),
+                labels[3]: (fine["lower"], np.setdiff1d(answers["lower" + GRID_CLEARED][1], checked)),
+            }
+            for label, (kept_rows, indices) in rows.items():
+                kept = np.array([index in kept_rows for index in indices], dtype=bool)
+                groups.setdefault((points, label), []).append((look["outcomes"][indices] == success, kept))
+    print("the network's grasps of each answer, cleared on the fine cloud too (the service's 4 mm hand), by how many "
+          f"of its points veto a grasp (the service: {NETWORK_FINE_MIN_POINTS}):")  # fmt: skip
+    print("points | answer | grasps | success % | kept | success % | dropped | success %")
+    for (points, label), judged in groups.items():
+        held = np.concatenate([h for h, _ in judged])
+        kept = np.concatenate([k for _, k in judged])
+        print(f"{points} | {label} | {len(held)} | {_percent(list(held))} | {kept.sum()} | {_percent(list(held[kept]))} | "
               f"{(~kept).sum()} | {_percent(list(held[~kept]))}")  # fmt: skip
 
 
@@ -494,6 +500,7 @@ def _tier_answers(
     grid_cone: float,
     fine_cone: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
+    network_fine_min_points: int = NETWORK_FINE_MIN_POINTS,
 ) -> dict[str, tuple[str, np.ndarray]]:
     """Each candidate answer of one look, as (outcomes key, row indices): the network's grasps that
     pass both checks ("checked"), those opposed on the grid's faces ("grid") or the fine cloud
@@ -502,15 +509,16 @@ def _tier_answers(
     grasps that pass both checks down to the fallback floor ("lower"). The clearance check is replayed
     with ``clearance`` on the grid's surface, as collected (so a margin below the collection's keeps
     what the collection kept). The service clears its pairs on the fine cloud as well, and the
-    network's grasps wherever it has read that cloud (every answer but "grid"), so each of those
-    answers does too, and is also given on the grid's surface alone, :data:`GRID_CLEARED` appended."""
+    network's grasps wherever it has read that cloud (every answer but "grid", ``network_fine_min_points``
+    of its points vetoing one), so each of those answers does too, and is also given on the grid's surface
+    alone, :data:`GRID_CLEARED` appended."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
     support = support_height(grid, voxel_size)
 
-    def cleared(rows: np.ndarray, points: np.ndarray) -> np.ndarray:
+    def cleared(rows: np.ndarray, points: np.ndarray, config: ClearanceConfig = clearance) -> np.ndarray:
         tolerance = None if support is None else contact_tolerances(points, np.eye(4), support, voxel_size)
-        return approach_is_clear(points, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=tolerance)
+        return approach_is_clear(points, rows[:, :3], rows[:, 3:7], config, point_tolerance=tolerance)
 
     def gripping(rows: np.ndarray, indices: np.ndarray) -> np.ndarray:
         if not len(indices):
@@ -537,7 +545,8 @@ def _tier_answers(
         "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
     }
     fine_cloud = look["cloud"][:, :3].astype(np.float64)
-    pairs_fine_clear, grasps_fine_clear = cleared(pairs, fine_cloud), cleared(grasps, fine_cloud)
+    pairs_fine_clear = cleared(pairs, fine_cloud)
+    grasps_fine_clear = cleared(grasps, fine_cloud, replace(clearance, min_points=network_fine_min_points))
     network_answers = {
         "checked": checked,
         "cloud": opposed(grasps, checked, look["cloud"], fine_cone),
@@ -643,6 +652,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="shares of the hand's opening the surface's pairs may close on, to compare")  # fmt: skip
     show.add_argument("--clearance-margins", type=float, nargs="+", default=[0.002, 0.003, 0.004, 0.005],
                       help="margins (m) of the clearance check to replay, the first the reference")  # fmt: skip
+    show.add_argument("--fine-min-points", type=int, nargs="+", default=[2, 5, 10, 20],
+                      help="how many fine-cloud points veto a network grasp, to compare")  # fmt: skip
     show.add_argument("--size", type=float, default=0.3, help="workspace side the grids were fused in (m)")
     args = parser.parse_args(argv)
     return collect(args) if args.command == "collect" else report(args)

@@ -12,7 +12,13 @@ from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
 from service.checks import SUPPORT_CONTACT_TOLERANCE, Checked, check_grasps, clear_of, contact_tolerances
-from service.clearance import FALLBACK_MARGIN, ClearanceConfig, approach_is_clear, clear_grasps
+from service.clearance import (
+    FALLBACK_MARGIN,
+    NETWORK_FINE_MIN_POINTS,
+    ClearanceConfig,
+    approach_is_clear,
+    clear_grasps,
+)
 from service.core import PlanningService
 from service.grid_surface import grid_surface_points
 from service.grip import GripConfig, gripping_grasps, support_height
@@ -21,7 +27,7 @@ from service.settings import PACKAGED_MODEL, Settings
 from tests.helpers.scenes import INTRINSICS, TABLE_Z, BoxScene, circle_views
 from tests.service.test_grip import FROM_ABOVE, SIZE, VOXEL, box, fused_session, grid_of
 from vgn_contract.gripper_description import default_gripper
-from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, Grasp, GraspQuery, SessionCreate
+from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, Grasp, GraspQuery, GraspResult, SessionCreate
 
 #: A vertical wall 3 cm thick through the middle of the grid, its faces turned 40 degrees about z
 #: from facing ±y: fingers closing along y meet it at 40 degrees, too slanted for :data:`STRICT`.
@@ -246,11 +252,11 @@ def test_the_antipodal_check_keeps_grasps_whose_pads_meet_opposed_faces_or_answe
 
 def test_the_networks_grasps_answered_once_the_fine_cloud_is_read_are_cleared_against_it():
     """Beside the box stands a plate 3 mm thick, where the fingers of grasps across the box's 6 cm side
-    come down: the grid's 7.5 mm voxels barely show it, the fine cloud does. With the grid's cone at half
-    a degree the network's grasps are judged on the fine cloud's faces (a cone of 89 degrees keeps them);
-    the fine cloud read, it clears them as it clears the surface's pairs, so none answered brushes the
-    plate, while the grid's surface alone would have let some through."""
-    box, plate = BoxScene(), BoxScene(lower=(0.14, 0.19, TABLE_Z), upper=(0.16, 0.193, TABLE_Z + 0.04))
+    come down: the grid's 7.5 mm voxels barely show it, the fine cloud does. With the grid's cone at a
+    hundredth of a degree the network's grasps are judged on the fine cloud's faces (89 degrees keeps them);
+    the fine cloud read, it clears them as it clears the surface's pairs (more of its points to veto one),
+    so none answered brushes the plate, while the grid's surface alone would have let some through."""
+    box, plate = BoxScene(), BoxScene(lower=(0.11, 0.19, TABLE_Z), upper=(0.19, 0.193, TABLE_Z + 0.06))
 
     def depth(pose: np.ndarray) -> np.ndarray:
         hits = [np.where(d > 0, d, np.inf) for d in (box.depth(pose), plate.depth(pose))]
@@ -261,7 +267,7 @@ def test_the_networks_grasps_answered_once_the_fine_cloud_is_read_are_cleared_ag
     answers = {}
     for check in (False, True):
         settings = Settings(model=PACKAGED_MODEL, api_key=None, antipodal_check=check,
-                            antipodal_check_grid_angle=0.5, antipodal_check_angle=89.0)  # fmt: skip
+                            antipodal_check_grid_angle=0.01, antipodal_check_angle=89.0)  # fmt: skip
         service = PlanningService.from_settings(settings)
         try:
             session = service.create_session(SessionCreate(intrinsics=INTRINSICS)).session_id
@@ -272,12 +278,16 @@ def test_the_networks_grasps_answered_once_the_fine_cloud_is_read_are_cleared_ag
         finally:
             service.close()
 
-    def brushing(grasps: list[Grasp]) -> int:
-        return len(grasps) - len(clear_of(grasps, cloud[:, :3], grid, VOXEL, np.eye(4), SIZE))
+    def brushing(answer: GraspResult) -> int:
+        # The answer's hand, with as many of the fine cloud's points to veto as the service's.
+        hand = ClearanceConfig(margin=answer.clearance_margin, min_points=NETWORK_FINE_MIN_POINTS)
+        kept = clear_of(answer.grasps, cloud[:, :3], grid, VOXEL, np.eye(4), SIZE, hand)
+        return len(answer.grasps) - len(kept)
 
     grid_cleared, answer = answers[False], answers[True]
-    assert grid_cleared.model == network and brushing(grid_cleared.grasps) > 0  # the grid's surface misses it
-    assert answer.model == network and answer.grasps and brushing(answer.grasps) == 0
+    assert grid_cleared.model == network and brushing(grid_cleared) > 0  # the grid's surface misses it
+    assert answer.model == network and answer.grasps and brushing(answer) == 0
+    assert answer.clearance_margin == grid_cleared.clearance_margin
     assert {tuple(g.position) for g in answer.grasps} < {tuple(g.position) for g in grid_cleared.grasps}
 
 

@@ -39,7 +39,8 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert grasp_outcomes.main(argv) == 0, "a rerun resumes"
     assert "round 0" not in capsys.readouterr().out and stored.read_bytes() == written
     report_argv = ["report", str(out), str(out), "--alignments", "0.0", "0.5", "--preferred", "0.5", "0.95",
-                   "--grid-angles", "1", "40", "--antipodal-angles", "1", "30", "--clearance-margins", "0.002", "0.004"]  # fmt: skip
+                   "--grid-angles", "1", "40", "--antipodal-angles", "1", "30", "--clearance-margins", "0.002", "0.004",
+                   "--fine-min-points", "2", "10"]  # fmt: skip
     assert grasp_outcomes.main(report_argv) == 0
     report = capsys.readouterr().out
     assert f"{2 * len(looks)} looks" in report and "min alignment | kept" in report  # the folder twice
@@ -74,10 +75,13 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert len(set(answered[:3])) == 1, report
     assert answered[3] <= answered[0] <= answered[4] <= answered[5]
     assert all("paired over" in line.split("|")[4] for line in orders[1:]), report
-    # The network's grasps of each answer, split by the fine cloud's clearance check into kept and dropped.
-    fine = report.split("answer | grasps | success % | kept")[1].split("\n\n")[0].strip().splitlines()[1:]
-    assert len(fine) == 4, report
-    assert all(int(row[1]) == int(row[3]) + int(row[5]) for row in (line.split("|") for line in fine))
+    # The network's grasps of each answer, split by the fine cloud's clearance check into kept and dropped;
+    # more points to veto one keep at least as many.
+    fine = report.split("points | answer | grasps |")[1].split("\n\n")[0].strip().splitlines()[1:]
+    rows = [line.split("|") for line in fine]
+    assert len(rows) == 8 and [int(row[0]) for row in rows] == [2] * 4 + [10] * 4, report
+    assert all(int(row[2]) == int(row[4]) + int(row[6]) for row in rows)
+    assert all(int(few[4]) <= int(many[4]) for few, many in zip(rows[:4], rows[4:], strict=True))
     # Each margin of the clearance check, its pairs cleared on the grid's surface and on the fine cloud
     # too, against the first margin on the grid's surface (itself: nothing differs). A wider hand
     # answers no more looks.
