@@ -7,10 +7,9 @@ opening 5 cm back along the approach and moves it straight to the grasp pose. A 
 
 The hand is the session's gripper description (``vgn_contract.gripper_description``, by default
 ``franka``), every part a box in the grasp frame (docs/conventions.md), each swept box tested
-exactly for the points inside its bounding box. Network grasps are cleared against the coarse
-TSDF's zero crossings (``SceneVolume.surface_points``, far cheaper than ``/cloud``); the
-surface's antipodal pairs, found on the fine cloud, against that cloud too, and so are the network's
-grasps of a request that has read it anyway."""
+exactly for the points inside its bounding box. Grasps are cleared against the coarse TSDF's zero
+crossings (``SceneVolume.surface_points``, far cheaper than ``/cloud``), and against the fine
+cloud too wherever a request reads it anyway (the surface's pairs are found on it)."""
 
 from __future__ import annotations
 
