@@ -409,19 +409,16 @@ def fine_clearance_report(
     )
     groups: dict[tuple[int, str], list[tuple[np.ndarray, np.ndarray]]] = {}
     for look in looks:
+        answers = _tier_answers(look, voxel_size, grid_cone, fine_cone)
+        checked, grid = answers["checked" + GRID_CLEARED][1], answers["grid"][1]
+        answered = dict(zip(labels, (grid, np.setdiff1d(checked, grid), answers["cloud" + GRID_CLEARED][1],
+                                     np.setdiff1d(answers["lower" + GRID_CLEARED][1], checked)), strict=True))  # fmt: skip
+        cloud, held = look["cloud"][:, :3].astype(np.float64), look["outcomes"] == success
+        tolerance = _contact_tolerance(cloud, support_height(look["grid"], voxel_size), voxel_size)
         for points in min_points:
-            answers = _tier_answers(look, voxel_size, grid_cone, fine_cone, network_fine_min_points=points)
-            fine = {name: set(answers[name][1]) for name in ("checked", "cloud", "lower")}
-            checked, grid = answers["checked" + GRID_CLEARED][1], answers["grid"][1]
-            rows = {
-                labels[0]: (fine["checked"], grid),  # the grid's answer is of the checked grasps
-                labels[1]: (fine["checked"], np.setdiff1d(checked, grid)),
-                labels[2]: (fine["cloud"], answers["cloud" + GRID_CLEARED][1]),
-                labels[3]: (fine["lower"], np.setdiff1d(answers["lower" + GRID_CLEARED][1], checked)),
-            }
-            for label, (kept_rows, indices) in rows.items():
-                kept = np.array([index in kept_rows for index in indices], dtype=bool)
-                groups.setdefault((points, label), []).append((look["outcomes"][indices] == success, kept))
+            clear = _cleared(look["grasps"], cloud, ClearanceConfig(min_points=points), tolerance)
+            for label, indices in answered.items():
+                groups.setdefault((points, label), []).append((held[indices], clear[indices]))
     print("the network's grasps of each answer, cleared on the fine cloud too (the service's 4 mm hand), by how many "
           f"of its points veto a grasp (the service: {NETWORK_FINE_MIN_POINTS}):")  # fmt: skip
     print("points | answer | grasps | success % | kept | success % | dropped | success %")
@@ -500,7 +497,6 @@ def _tier_answers(
     grid_cone: float,
     fine_cone: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
-    network_fine_min_points: int = NETWORK_FINE_MIN_POINTS,
 ) -> dict[str, tuple[str, np.ndarray]]:
     """Each candidate answer of one look, as (outcomes key, row indices): the network's grasps that
     pass both checks ("checked"), those opposed on the grid's faces ("grid") or the fine cloud
@@ -509,7 +505,7 @@ def _tier_answers(
     grasps that pass both checks down to the fallback floor ("lower"). The clearance check is replayed
     with ``clearance`` on the grid's surface, as collected (so a margin below the collection's keeps
     what the collection kept). The service clears its pairs on the fine cloud as well, and the
-    network's grasps wherever it has read that cloud (every answer but "grid", ``network_fine_min_points``
+    network's grasps wherever it has read that cloud (every answer but "grid", ``NETWORK_FINE_MIN_POINTS``
     of its points vetoing one), so each of those answers does too, and is also given on the grid's surface
     alone, :data:`GRID_CLEARED` appended."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
@@ -517,8 +513,7 @@ def _tier_answers(
     support = support_height(grid, voxel_size)
 
     def cleared(rows: np.ndarray, points: np.ndarray, config: ClearanceConfig = clearance) -> np.ndarray:
-        tolerance = None if support is None else contact_tolerances(points, np.eye(4), support, voxel_size)
-        return approach_is_clear(points, rows[:, :3], rows[:, 3:7], config, point_tolerance=tolerance)
+        return _cleared(rows, points, config, _contact_tolerance(points, support, voxel_size))
 
     def gripping(rows: np.ndarray, indices: np.ndarray) -> np.ndarray:
         if not len(indices):
@@ -546,7 +541,7 @@ def _tier_answers(
     }
     fine_cloud = look["cloud"][:, :3].astype(np.float64)
     pairs_fine_clear = cleared(pairs, fine_cloud)
-    grasps_fine_clear = cleared(grasps, fine_cloud, replace(clearance, min_points=network_fine_min_points))
+    grasps_fine_clear = cleared(grasps, fine_cloud, replace(clearance, min_points=NETWORK_FINE_MIN_POINTS))
     network_answers = {
         "checked": checked,
         "cloud": opposed(grasps, checked, look["cloud"], fine_cone),
@@ -559,6 +554,19 @@ def _tier_answers(
         **{name: ("pair_outcomes", rows[pairs_fine_clear[rows]]) for name, rows in pair_answers.items()},
         **{name + GRID_CLEARED: ("pair_outcomes", rows) for name, rows in pair_answers.items()},
     }
+
+
+def _contact_tolerance(points: np.ndarray, support: float | None, voxel_size: float) -> np.ndarray | None:
+    """Each of ``points``' contact tolerance in the clearance check, given the support plane's height
+    (None: no plane, no tolerance)."""
+    return None if support is None else contact_tolerances(points, np.eye(4), support, voxel_size)
+
+
+def _cleared(
+    rows: np.ndarray, points: np.ndarray, clearance: ClearanceConfig, tolerance: np.ndarray | None
+) -> np.ndarray:
+    """(G,) bool: which grasp ``rows`` (position, orientation first) the clearance check passes on ``points``."""
+    return approach_is_clear(points, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=tolerance)
 
 
 def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -> None:
