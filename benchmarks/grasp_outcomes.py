@@ -35,7 +35,7 @@ from scipy.spatial.transform import Rotation
 
 from client.connect import connect
 from service.baseline import grips_antipodally
-from service.checks import SUPPORT_CONTACT_TOLERANCE, contact_tolerances
+from service.checks import SUPPORT_CONTACT_TOLERANCE, ObservedScene, contact_tolerances, observed_for_checks
 from service.clearance import NETWORK_FINE_MIN_POINTS, ClearanceConfig, approach_is_clear
 from service.grid_surface import grid_surface_cloud, grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
@@ -413,10 +413,10 @@ def fine_clearance_report(
         checked, grid = answers["checked" + GRID_CLEARED][1], answers["grid"][1]
         answered = dict(zip(labels, (grid, np.setdiff1d(checked, grid), answers["cloud" + GRID_CLEARED][1],
                                      np.setdiff1d(answers["lower" + GRID_CLEARED][1], checked)), strict=True))  # fmt: skip
-        cloud, held = look["cloud"][:, :3].astype(np.float64), look["outcomes"] == success
-        tolerance = _contact_tolerance(cloud, support_height(look["grid"], voxel_size), voxel_size)
+        held = look["outcomes"] == success
+        seen = _fine_cloud_seen(look, voxel_size)
         for points in min_points:
-            clear = _cleared(look["grasps"], cloud, ClearanceConfig(min_points=points), tolerance)
+            clear = _cleared(look["grasps"], seen, ClearanceConfig(min_points=points))
             for label, indices in answered.items():
                 groups.setdefault((points, label), []).append((held[indices], clear[indices]))
     print("the network's grasps of each answer, cleared on the fine cloud too (the service's 4 mm hand), by how many "
@@ -510,10 +510,9 @@ def _tier_answers(
     alone, :data:`GRID_CLEARED` appended."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
-    support = support_height(grid, voxel_size)
 
-    def cleared(rows: np.ndarray, points: np.ndarray, config: ClearanceConfig = clearance) -> np.ndarray:
-        return _cleared(rows, points, config, _contact_tolerance(points, support, voxel_size))
+    def cleared(rows: np.ndarray, seen: ObservedScene, config: ClearanceConfig = clearance) -> np.ndarray:
+        return _cleared(rows, seen, config)
 
     def gripping(rows: np.ndarray, indices: np.ndarray) -> np.ndarray:
         if not len(indices):
@@ -528,7 +527,8 @@ def _tier_answers(
         rotations = Rotation.from_quat(rows[indices, 3:7]).as_matrix()
         return indices[grips_antipodally(cloud, rows[indices, :3], rotations, None, cone)]
 
-    surface = grid_surface_points(grid, voxel_size)
+    size = voxel_size * grid.shape[0]
+    surface = observed_for_checks(grid_surface_points(grid, voxel_size), grid, voxel_size, np.eye(4), size)
     grasps_clear = (grasps[:, 9] > 0) & cleared(grasps, surface)
     checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & grasps_clear))
     every_pair = np.flatnonzero(cleared(pairs, surface))
@@ -539,7 +539,7 @@ def _tier_answers(
         "every pair": every_pair,
         "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
     }
-    fine_cloud = look["cloud"][:, :3].astype(np.float64)
+    fine_cloud = _fine_cloud_seen(look, voxel_size)
     pairs_fine_clear = cleared(pairs, fine_cloud)
     grasps_fine_clear = cleared(grasps, fine_cloud, replace(clearance, min_points=NETWORK_FINE_MIN_POINTS))
     network_answers = {
@@ -556,17 +556,22 @@ def _tier_answers(
     }
 
 
-def _contact_tolerance(points: np.ndarray, support: float | None, voxel_size: float) -> np.ndarray | None:
-    """Each of ``points``' contact tolerance in the clearance check, given the support plane's height
-    (None: no plane, no tolerance)."""
-    return None if support is None else contact_tolerances(points, np.eye(4), support, voxel_size)
+def _fine_cloud_seen(look: dict[str, np.ndarray], voxel_size: float) -> ObservedScene:
+    """A look's fine cloud as the service's clearance check judges against it (its points' spacing:
+    the service's default fine volume's)."""
+    grid = look["grid"]
+    size = voxel_size * grid.shape[0]
+    spacing = size / Settings.model_fields["cloud_resolution"].default
+    cloud = look["cloud"][:, :3].astype(np.float64)
+    return observed_for_checks(cloud, grid, voxel_size, np.eye(4), size, spacing=spacing)
 
 
-def _cleared(
-    rows: np.ndarray, points: np.ndarray, clearance: ClearanceConfig, tolerance: np.ndarray | None
-) -> np.ndarray:
-    """(G,) bool: which grasp ``rows`` (position, orientation first) the clearance check passes on ``points``."""
-    return approach_is_clear(points, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=tolerance)
+def _cleared(rows: np.ndarray, seen: ObservedScene, clearance: ClearanceConfig) -> np.ndarray:
+    """(G,) bool: which grasp ``rows`` (position, orientation first) the clearance check passes on
+    what ``seen`` holds (the cube's frame)."""
+    if seen.surface is None:
+        return np.ones(len(rows), dtype=bool)
+    return approach_is_clear(seen.surface, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=seen.tolerance)
 
 
 def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -> None:

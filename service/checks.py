@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from service.clearance import ClearanceConfig, approach_is_clear, fingers_inside
+from service.clearance import ClearanceConfig, approach_is_clear, continued_past_sides, fingers_inside
 from service.grip import GripConfig, GripMeasure, measure_grip, support_height
 from service.hands import active_hand
 from vgn_contract.schemas import Grasp
@@ -74,7 +74,7 @@ def check_grasps(
     (``workspace_size``, m)."""
     if not grasps or (surface is None and grid is None):
         return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0, _count(surface, 0))
-    seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size, clearance)
+    seen = observed_for_checks(surface, grid, voxel_size, workspace_pose, workspace_size, clearance)
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     orientations = Rotation.from_quat([g.orientation for g in grasps])
     inside, approach_clear, measure = _stages(positions, orientations, seen)
@@ -135,7 +135,7 @@ def passes_checks(
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
     if not len(positions):
         return np.zeros(0, dtype=bool)
-    seen = _observed(surface, grid, voxel_size, workspace_pose, workspace_size)
+    seen = observed_for_checks(surface, grid, voxel_size, workspace_pose, workspace_size)
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4))
     clear, measure = _judge(positions, rotations, seen)
     return clear & _grip_passes(measure, len(positions), grip_config)
@@ -149,16 +149,18 @@ def clear_of(
     workspace_pose: np.ndarray,
     workspace_size: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
+    spacing: float | None = None,
 ) -> list[Grasp]:
-    """The ``grasps`` whose open hand's approach misses ``points`` (world frame), judged as
-    :func:`check_grasps` judges its surface with ``clearance``: the support plane (found on ``grid``; None: none) may
-    meet the fingertips in the approach's last :data:`SUPPORT_CONTACT_TOLERANCE`. The surface's
-    antipodal pairs are cleared so against the fine cloud they were found on, whose 2.5 mm surface
-    shows what brushes past the fingers between the grid's 7.5 mm crossings."""
+    """The ``grasps`` whose open hand's approach misses ``points`` (world frame, ``spacing`` m apart;
+    default ``voxel_size``), judged as :func:`check_grasps` judges its surface with ``clearance``: the
+    support plane (found on ``grid``; None: none) may meet the fingertips in the approach's last
+    :data:`SUPPORT_CONTACT_TOLERANCE`. The surface's antipodal pairs are cleared so against the fine
+    cloud they were found on, whose 2.5 mm surface shows what brushes past the fingers between the
+    grid's 7.5 mm crossings."""
     if not grasps:
         return []
-    seen = _observed(np.asarray(points, dtype=np.float64).reshape(-1, 3), grid, voxel_size, workspace_pose,
-                     workspace_size, clearance)  # fmt: skip
+    seen = observed_for_checks(np.asarray(points, dtype=np.float64).reshape(-1, 3), grid, voxel_size, workspace_pose,
+                     workspace_size, clearance, spacing)  # fmt: skip
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     clear = _approach_clear(positions, np.array([g.orientation for g in grasps], dtype=np.float64), seen)
     return [g for g, ok in zip(grasps, clear, strict=True) if ok]
@@ -169,7 +171,7 @@ def _count(check_input: np.ndarray | None, dropped: int) -> int | None:
 
 
 @dataclass(frozen=True)
-class _Observed:
+class ObservedScene:
     """What a request's grasps are judged against, worked out once for all their poses: the world
     frame surface (None: no clearance check) with each point's contact tolerance, the grid (None:
     no grip check), the workspace, the support plane's height (None: none found, or no grid) and the
@@ -185,24 +187,31 @@ class _Observed:
     clearance: ClearanceConfig = ClearanceConfig()  # noqa: RUF009 (frozen: one shared default is safe)
 
 
-def _observed(
+def observed_for_checks(
     surface: np.ndarray | None,
     grid: np.ndarray | None,
     voxel_size: float,
     workspace_pose: np.ndarray,
     workspace_size: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
-) -> _Observed:
+    spacing: float | None = None,
+) -> ObservedScene:
+    """What grasps are judged against; ``surface``'s points lie ``spacing`` m apart (default: the
+    grid's crossings, ``voxel_size``) and go on past the cube's sides where they meet them."""
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     support = None if grid is None else support_height(grid, voxel_size)
     tolerance = None
+    if surface is not None:
+        floor = None if support is None else support + SUPPORT_BAND_VOXELS * voxel_size
+        beyond = continued_past_sides(surface, to_workspace, workspace_size, spacing or voxel_size, floor)
+        surface = np.vstack([surface, beyond]) if len(beyond) else surface
     if surface is not None and support is not None:
         tolerance = contact_tolerances(surface, to_workspace, support, voxel_size)
-    return _Observed(surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support, clearance)
+    return ObservedScene(surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support, clearance)
 
 
 def _judge(
-    positions: np.ndarray, orientations: Rotation, seen: _Observed
+    positions: np.ndarray, orientations: Rotation, seen: ObservedScene
 ) -> tuple[np.ndarray, GripMeasure | None]:
     """Clearance (G,) bool (all True without a surface) and the grip measure (None without a grid)."""
     inside, approach_clear, measure = _stages(positions, orientations, seen)
@@ -210,7 +219,7 @@ def _judge(
 
 
 def _stages(
-    positions: np.ndarray, orientations: Rotation, seen: _Observed
+    positions: np.ndarray, orientations: Rotation, seen: ObservedScene
 ) -> tuple[np.ndarray, np.ndarray, GripMeasure | None]:
     """Each stage's verdict apart, so an answer can say which dropped a grasp: fingers inside the
     cube (G,) bool and a clear approach (G,) bool (both all True without a surface), and the grip
@@ -224,14 +233,14 @@ def _stages(
     return inside, approach_clear, measure
 
 
-def _clear(positions: np.ndarray, orientations: Rotation, seen: _Observed) -> np.ndarray:
+def _clear(positions: np.ndarray, orientations: Rotation, seen: ObservedScene) -> np.ndarray:
     """(G,) bool: the open hand's approach misses the surface and its fingers stay in the cube."""
     quaternions = orientations.as_quat()
     inside = fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
     return inside & _approach_clear(positions, quaternions, seen)
 
 
-def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: _Observed) -> np.ndarray:
+def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: ObservedScene) -> np.ndarray:
     """(G,) bool: the open hand's approach misses the surface. The support plane's points may meet the
     hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the approach: fingertips on the table stop a
     guarded approach there, around a flat object."""
@@ -250,7 +259,7 @@ def contact_tolerances(
     return np.where(on_support, SUPPORT_CONTACT_TOLERANCE, ClearanceConfig().contact_tolerance)
 
 
-def _grip_measure(positions: np.ndarray, orientations: Rotation, seen: _Observed) -> GripMeasure:
+def _grip_measure(positions: np.ndarray, orientations: Rotation, seen: ObservedScene) -> GripMeasure:
     """The grip check's measure of world-frame grasps on the workspace-frame grid."""
     to_workspace = seen.to_workspace
     local_positions = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]

@@ -36,6 +36,14 @@ FALLBACK_MARGIN = 0.002
 NETWORK_FINE_MIN_POINTS = 10
 
 
+#: The volume shows nothing past the cube's four side faces. Where observed surface meets one (comes
+#: within this many of its point spacings of it: surface extraction leaves the outermost voxel and a
+#: half bare), the check takes it to go on straight outwards for :data:`EDGE_REACH` (m), so that a hand
+#: at the cube's edge stays clear of an object that sticks out of the cube (docs/concepts.md).
+EDGE_BAND_SPACINGS = 2.0
+EDGE_REACH = 0.06
+
+
 @dataclass(frozen=True)
 class ClearanceConfig:
     """Knobs of the check.
@@ -201,6 +209,35 @@ def fingers_inside(
     )
     local = ends @ to_workspace[:3, :3].T + to_workspace[:3, 3]
     return np.all((local >= 0.0) & (local <= size), axis=(1, 2))
+
+
+def continued_past_sides(
+    points: np.ndarray, to_workspace: np.ndarray, size: float, spacing: float, floor: float | None
+) -> np.ndarray:
+    """(K, 3) world-frame points that carry ``points`` (world frame, ``spacing`` m apart) on straight
+    out of the workspace cube (side ``size`` m, ``to_workspace`` taking the world to the cube's
+    frame) where they meet one of its side faces (:data:`EDGE_BAND_SPACINGS`), every ``spacing``
+    for :data:`EDGE_REACH`; points at workspace height ``floor`` or below (the support plane) are
+    not carried on (None: every point is)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    local = points @ to_workspace[:3, :3].T + to_workspace[:3, 3]
+    if floor is not None:
+        local = local[local[:, 2] > floor]
+    steps = np.arange(1, int(round(EDGE_REACH / spacing)) + 1) * spacing
+    carried = []
+    for axis in (0, 1):
+        for face, outwards in ((0.0, -1.0), (size, 1.0)):
+            edge = local[np.abs(local[:, axis] - face) < EDGE_BAND_SPACINGS * spacing]
+            if not len(edge):
+                continue
+            copies = np.repeat(edge[None], len(steps), axis=0)
+            copies[:, :, axis] = face + outwards * steps[:, None]
+            carried.append(copies.reshape(-1, 3))
+    if not carried:
+        return np.zeros((0, 3))
+    from_workspace = np.linalg.inv(to_workspace)
+    beyond = np.concatenate(carried)
+    return beyond @ from_workspace[:3, :3].T + from_workspace[:3, 3]
 
 
 def clear_grasps(

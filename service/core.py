@@ -347,7 +347,7 @@ class PlanningService:
                 return checked
             hand = replace(margin, min_points=NETWORK_FINE_MIN_POINTS) if network else margin
             kept = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
-                            workspace_size, hand)  # fmt: skip
+                            workspace_size, hand, workspace_size / self.settings.cloud_resolution)  # fmt: skip
             dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(kept)
             return replace(checked, grasps=kept, clearance_dropped=dropped)
 
