@@ -19,8 +19,8 @@ checks, judged by the faces their pads meet on the fine cloud. With ``collect --
 also executes up to N of the surface's antipodal pairs (the service's answer where the network's
 grasps fail the checks), and the report ends with how often a random grasp of each look's answer
 succeeds under each order of the antipodal check's answers (``TIER_ORDERS``), with how the network's
-grasps of each answer fare when cleared on the fine cloud too, and with the clearance check's hand
-grown by each of several margins. Choose settings on *training* objects; benchmark on held-out ones.
+grasps of each answer fare when cleared on the fine cloud too, with the clearance check's hand
+grown by each of several margins, and with the surface taken to go on past the cube's sides or not. Choose settings on *training* objects; benchmark on held-out ones.
 """
 
 from __future__ import annotations
@@ -223,6 +223,8 @@ def report(args: argparse.Namespace) -> int:
         fine_clearance_report(with_pairs, voxel_size, args.fine_min_points)
         print()
         margin_report(with_pairs, voxel_size, args.clearance_margins)
+        print()
+        sides_report(with_pairs, voxel_size)
     return 0
 
 
@@ -461,6 +463,31 @@ def margin_report(
         print(f"{margin * 1000:11.1f} | {label} | {len(answered)} | {_percent(answered)} | {against}")
 
 
+def sides_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats: int = 5000) -> None:
+    """Print how often a random grasp of each look's answer succeeds, in the service's order, with the
+    surface taken to go on past the cube's sides where it meets them (the service) and without."""
+    grid_cone, fine_cone = (np.radians(Settings.model_fields[name].default)
+                            for name in ("antipodal_check_grid_angle", "antipodal_check_angle"))  # fmt: skip
+    share = Settings.model_fields["narrow_pair_share"].default
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    checked, fallback, _ = next(iter(TIER_ORDERS.values()))
+    values: dict[bool, list[float]] = {False: [], True: []}
+    for look in looks:
+        for past_sides in values:
+            answers = _tier_answers(look, voxel_size, grid_cone, fine_cone, past_sides=past_sides)
+            held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
+            order = _order(answers, checked, fallback)
+            values[past_sides].append(_answer(look, answers, held, order, share)[1])
+    print("the surface taken to go on past the cube's sides where it meets them, in the service's order:")
+    print("surface | looks answered | success % per look | against not carried on")
+    reference = np.array(values[False])
+    for past_sides, per_look in values.items():
+        answered = [v for v in per_look if not np.isnan(v)]
+        against = _paired(reference, np.array(per_look), repeats) if past_sides else "-"
+        label = "carried on past the sides" if past_sides else "not carried on"
+        print(f"{label} | {len(answered)} | {_percent(answered)} | {against}")
+
+
 def _answer(
     look: dict[str, np.ndarray],
     answers: dict[str, tuple[str, np.ndarray]],
@@ -497,6 +524,7 @@ def _tier_answers(
     grid_cone: float,
     fine_cone: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
+    past_sides: bool = True,
 ) -> dict[str, tuple[str, np.ndarray]]:
     """Each candidate answer of one look, as (outcomes key, row indices): the network's grasps that
     pass both checks ("checked"), those opposed on the grid's faces ("grid") or the fine cloud
@@ -507,7 +535,8 @@ def _tier_answers(
     what the collection kept). The service clears its pairs on the fine cloud as well, and the
     network's grasps wherever it has read that cloud (every answer but "grid", ``NETWORK_FINE_MIN_POINTS``
     of its points vetoing one), so each of those answers does too, and is also given on the grid's surface
-    alone, :data:`GRID_CLEARED` appended."""
+    alone, :data:`GRID_CLEARED` appended. Without ``past_sides`` the surface is not taken to go on past
+    the cube's sides (the service before)."""
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
 
@@ -528,7 +557,9 @@ def _tier_answers(
         return indices[grips_antipodally(cloud, rows[indices, :3], rotations, None, cone)]
 
     size = voxel_size * grid.shape[0]
-    surface = observed_for_checks(grid_surface_points(grid, voxel_size), grid, voxel_size, np.eye(4), size)
+    surface = observed_for_checks(
+        grid_surface_points(grid, voxel_size), grid, voxel_size, np.eye(4), size, past_sides=past_sides
+    )
     grasps_clear = (grasps[:, 9] > 0) & cleared(grasps, surface)
     checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & grasps_clear))
     every_pair = np.flatnonzero(cleared(pairs, surface))
@@ -539,7 +570,7 @@ def _tier_answers(
         "every pair": every_pair,
         "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
     }
-    fine_cloud = _fine_cloud_seen(look, voxel_size)
+    fine_cloud = _fine_cloud_seen(look, voxel_size, past_sides)
     pairs_fine_clear = cleared(pairs, fine_cloud)
     grasps_fine_clear = cleared(grasps, fine_cloud, replace(clearance, min_points=NETWORK_FINE_MIN_POINTS))
     network_answers = {
@@ -556,14 +587,18 @@ def _tier_answers(
     }
 
 
-def _fine_cloud_seen(look: dict[str, np.ndarray], voxel_size: float) -> ObservedScene:
+def _fine_cloud_seen(
+    look: dict[str, np.ndarray], voxel_size: float, past_sides: bool = True
+) -> ObservedScene:
     """A look's fine cloud as the service's clearance check judges against it (its points' spacing:
-    the service's default fine volume's)."""
+    the service's default fine volume's), ``past_sides`` as :func:`_tier_answers` takes it."""
     grid = look["grid"]
     size = voxel_size * grid.shape[0]
     spacing = size / Settings.model_fields["cloud_resolution"].default
     cloud = look["cloud"][:, :3].astype(np.float64)
-    return observed_for_checks(cloud, grid, voxel_size, np.eye(4), size, spacing=spacing)
+    return observed_for_checks(
+        cloud, grid, voxel_size, np.eye(4), size, spacing=spacing, past_sides=past_sides
+    )
 
 
 def _cleared(rows: np.ndarray, seen: ObservedScene, clearance: ClearanceConfig) -> np.ndarray:
@@ -571,7 +606,9 @@ def _cleared(rows: np.ndarray, seen: ObservedScene, clearance: ClearanceConfig) 
     what ``seen`` holds (the cube's frame)."""
     if seen.surface is None:
         return np.ones(len(rows), dtype=bool)
-    return approach_is_clear(seen.surface, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=seen.tolerance)
+    return approach_is_clear(
+        seen.surface, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=seen.tolerance
+    )
 
 
 def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -> None:

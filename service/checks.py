@@ -195,19 +195,23 @@ def observed_for_checks(
     workspace_size: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
     spacing: float | None = None,
+    past_sides: bool = True,
 ) -> ObservedScene:
     """What grasps are judged against; ``surface``'s points lie ``spacing`` m apart (default: the
-    grid's crossings, ``voxel_size``) and go on past the cube's sides where they meet them."""
+    grid's crossings, ``voxel_size``) and, with ``past_sides`` (the service's way; a replay may leave
+    it out to compare), go on past the cube's sides where they meet them."""
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     support = None if grid is None else support_height(grid, voxel_size)
     tolerance = None
-    if surface is not None:
+    if surface is not None and past_sides:
         floor = None if support is None else support + SUPPORT_BAND_VOXELS * voxel_size
         beyond = continued_past_sides(surface, to_workspace, workspace_size, spacing or voxel_size, floor)
         surface = np.vstack([surface, beyond]) if len(beyond) else surface
     if surface is not None and support is not None:
         tolerance = contact_tolerances(surface, to_workspace, support, voxel_size)
-    return ObservedScene(surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support, clearance)
+    return ObservedScene(
+        surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support, clearance
+    )
 
 
 def _judge(

@@ -355,6 +355,29 @@ def test_a_grasp_whose_open_fingers_reach_outside_the_workspace_is_not_clear():
     assert (inside.workspace_dropped, inside.clearance_dropped) == (0, 0)
 
 
+def test_an_object_sticking_out_of_the_cube_is_taken_to_go_on_past_its_side():
+    """The volume shows an object that crosses the cube's side only up to the side. A hand leaning out
+    over that side towards a post is dropped where it would sweep through the rest of the object, and
+    kept where the table beyond the side is empty."""
+    table = box((0.0, 0.0, 0.0), (SIZE, SIZE, TABLE_Z))
+    post = box((0.045, 0.14, TABLE_Z), (0.065, 0.16, TABLE_Z + 0.08))
+    crossing = box((-0.06, 0.12, TABLE_Z), (0.012, 0.18, TABLE_Z + 0.06))  # 1.2 cm of it in the cube
+    leaning = grasp_at((0.055, 0.15, TABLE_Z + 0.05), FROM_ABOVE * Rotation.from_euler("y", -55, degrees=True),
+                       width=0.02)  # fmt: skip
+    grid = grid_of(lambda p: np.minimum(np.minimum(table(p), post(p)), crossing(p)))
+    surface = grid_surface_points(grid, VOXEL)
+    result = check_grasps([leaning], surface, None, VOXEL, np.eye(4), SIZE, STRICT, False)
+    assert result.grasps == [] and (result.workspace_dropped, result.clearance_dropped) == (0, 1)
+    # What the cube shows of that object does not meet the hand: what goes on past the side does.
+    tolerance = contact_tolerances(surface, np.eye(4), support_height(grid, VOXEL), VOXEL)
+    assert approach_is_clear(surface, [leaning.position], [leaning.orientation], point_tolerance=tolerance)[0]
+    alone = grid_of(lambda p: np.minimum(table(p), post(p)))
+    kept = check_grasps(
+        [leaning], grid_surface_points(alone, VOXEL), None, VOXEL, np.eye(4), SIZE, STRICT, False
+    )
+    assert kept.grasps == [leaning]
+
+
 def test_without_the_grip_check_no_other_pose_is_tried():
     """Only the grip check can vouch for a pose the network never scored: a grasp on a post whose
     fingers open outside the cube stays dropped without it, and is turned into the cube with it."""

@@ -15,9 +15,12 @@ from scipy.spatial.transform import Rotation
 
 from client.grpc_client import GRPCClient
 from service.clearance import (
+    EDGE_BAND_SPACINGS,
+    EDGE_REACH,
     ClearanceConfig,
     approach_is_clear,
     clear_grasps,
+    continued_past_sides,
     hand_boxes,
 )
 from service.core import PlanningService
@@ -144,6 +147,28 @@ def test_the_swept_volume_matches_dense_sampling_of_the_motion():
     disagree = np.flatnonzero(verdicts == swept)  # verdict True means clear, i.e. not swept
     assert len(disagree) <= 4  # only points within 0.5 mm of a sampled placement may differ
     assert swept.sum() > 200
+
+
+def test_surface_that_meets_a_side_of_the_cube_is_carried_on_straight_out_of_it():
+    """Points at a side face go on outwards every spacing for the reach; points inside the cube away
+    from its sides, or at the floor, do not; the cube may stand anywhere in the world."""
+    size, spacing, floor = 0.3, 0.0075, 0.05
+    at_side = np.array([[0.3 - 0.5 * EDGE_BAND_SPACINGS * spacing, 0.15, 0.08]])  # near x = size
+    inside = np.array([[0.15, 0.15, 0.08], [0.3 - 1.5 * EDGE_BAND_SPACINGS * spacing, 0.2, 0.08]])
+    on_floor = np.array([[0.001, 0.15, floor - 0.001]])  # the table at the -x side: not an object's
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_euler("z", 30, degrees=True).as_matrix()
+    pose[:3, 3] = [0.4, -0.2, 0.7]
+    world = np.vstack([at_side, inside, on_floor]) @ pose[:3, :3].T + pose[:3, 3]
+    carried = continued_past_sides(world, np.linalg.inv(pose), size, spacing, floor)
+    local = (carried - pose[:3, 3]) @ pose[:3, :3]
+    steps = int(round(EDGE_REACH / spacing))
+    assert len(local) == steps
+    np.testing.assert_allclose(np.sort(local[:, 0]), 0.3 + spacing * np.arange(1, steps + 1), atol=1e-9)
+    np.testing.assert_allclose(local[:, 1:], np.tile(at_side[0, 1:], (steps, 1)), atol=1e-9)
+    everything = continued_past_sides(world, np.linalg.inv(pose), size, spacing, None)
+    assert len(everything) == 2 * steps  # without a floor the table's point goes on too
+    assert continued_past_sides(np.zeros((0, 3)), np.eye(4), size, spacing, floor).shape == (0, 3)
 
 
 def test_no_geometry_or_no_grasps():

@@ -85,11 +85,15 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     # Each margin of the clearance check, its pairs cleared on the grid's surface and on the fine cloud
     # too, against the first margin on the grid's surface (itself: nothing differs). A wider hand
     # answers no more looks.
-    margins = report.split("margin (mm) | pairs cleared")[1].strip().splitlines()[1:]
+    margins = report.split("margin (mm) | pairs cleared")[1].split("\n\n")[0].strip().splitlines()[1:]
     assert len(margins) == 4, report
     assert "(0 differ)" in margins[0] and all("paired over" in line for line in margins)
     answered = [int(line.split("|")[2]) for line in margins]
     assert answered[1] <= answered[0] and answered[2] <= answered[0] and answered[3] <= answered[2]
+    # The surface carried on past the cube's sides, against not: what it adds can only veto grasps.
+    sides = report.split("surface | looks answered |")[1].split("\n\n")[0].strip().splitlines()[1:]
+    assert [line.split("|")[0].strip() for line in sides] == ["not carried on", "carried on past the sides"]
+    assert int(sides[1].split("|")[1]) <= int(sides[0].split("|")[1]) and "paired over" in sides[1], report
     # Narrowing the pairs to each share of the opening, then every executed pair split at the default share.
     shares = report.split("share of the opening |")[1].split("\n\n")[0].splitlines()[1:]
     assert len(shares) == 5, report
