@@ -472,13 +472,28 @@ def sides_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats:
     success = OUTCOMES.index(Outcome.SUCCESS)
     checked, fallback, _ = next(iter(TIER_ORDERS.values()))
     values: dict[bool, list[float]] = {False: [], True: []}
+    # The grasps the carried-on surface vetoes: the network's (quality >= the operating threshold) on
+    # the grid's surface, the pairs on the fine cloud, as the service clears each.
+    judged: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"network's grasps": [], "surface's pairs": []}
     for look in looks:
         for past_sides in values:
             answers = _tier_answers(look, voxel_size, grid_cone, fine_cone, past_sides=past_sides)
             held = {tier: look[source][rows] == success for tier, (source, rows) in answers.items()}
             order = _order(answers, checked, fallback)
             values[past_sides].append(_answer(look, answers, held, order, share)[1])
-    print("the surface taken to go on past the cube's sides where it meets them, in the service's order:")
+        for label, part in _vetoed_past_sides(look, voxel_size).items():
+            judged[label].append(part)
+    print(
+        "grasps clear of the surface as observed, by whether the surface carried on past the cube's sides vetoes them:"
+    )
+    print("grasps | clear | success % | vetoed | success %")
+    for label, parts in judged.items():
+        held = np.concatenate([h for h, _ in parts]) if parts else np.zeros(0, dtype=bool)
+        vetoed = np.concatenate([v for _, v in parts]) if parts else np.zeros(0, dtype=bool)
+        print(
+            f"{label} | {len(held)} | {_percent(list(held))} | {vetoed.sum()} | {_percent(list(held[vetoed]))}"
+        )
+    print("\nthe surface taken to go on past the cube's sides where it meets them, in the service's order:")
     print("surface | looks answered | success % per look | against not carried on")
     reference = np.array(values[False])
     for past_sides, per_look in values.items():
@@ -486,6 +501,30 @@ def sides_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats:
         against = _paired(reference, np.array(per_look), repeats) if past_sides else "-"
         label = "carried on past the sides" if past_sides else "not carried on"
         print(f"{label} | {len(answered)} | {_percent(answered)} | {against}")
+
+
+def _vetoed_past_sides(
+    look: dict[str, np.ndarray], voxel_size: float
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Of a look's network grasps (quality >= the operating threshold, cleared on the grid's surface)
+    and its surface's pairs (cleared on the fine cloud), those clear of the surface as observed:
+    whether each held, and whether the surface carried on past the cube's sides vetoes it."""
+    grid, size = look["grid"], voxel_size * look["grid"].shape[0]
+    surface = grid_surface_points(grid, voxel_size)
+    answered = (look["grasps"][:, 8] >= DEFAULT_THRESHOLD) & (look["grasps"][:, 9] > 0)
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    judged = {}
+    for label, rows, outcomes, observed, carried in (
+        ("network's grasps", look["grasps"][answered], look["outcomes"][answered],
+         observed_for_checks(surface, grid, voxel_size, np.eye(4), size, past_sides=False),
+         observed_for_checks(surface, grid, voxel_size, np.eye(4), size)),
+        ("surface's pairs", look["pairs"], look["pair_outcomes"],
+         _fine_cloud_seen(look, voxel_size, past_sides=False), _fine_cloud_seen(look, voxel_size)),
+    ):  # fmt: skip
+        clear = _cleared(rows, observed, ClearanceConfig()) if len(rows) else np.zeros(0, dtype=bool)
+        vetoed = clear & ~_cleared(rows, carried, ClearanceConfig()) if len(rows) else clear
+        judged[label] = (outcomes[clear] == success, vetoed[clear])
+    return judged
 
 
 def _answer(

@@ -276,7 +276,10 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                           "to the antipodal baseline (the steps on the way carry a variant.md)?"),
     ("fine-clearance-", "What does clearing the network's grasps against the fine cloud as well, wherever a "
                         "request has read it anyway (the antipodal check past the grid's faces, the fallback), do "
-                        "to the default request?"),
+                        "to the default request? (Runs that newer results replace in the README's table.)"),
+    ("beyond-the-sides-", "What does taking observed surface that meets one of the workspace cube's side faces to go "
+                          "on past it, in the clearance check, do to the default request and to the antipodal "
+                          "baseline?"),
     ("seed-", "Do other seeds (other draws of scenes, the same command; the seed opens the folder's name) "
               "agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "

@@ -91,6 +91,9 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     answered = [int(line.split("|")[2]) for line in margins]
     assert answered[1] <= answered[0] and answered[2] <= answered[0] and answered[3] <= answered[2]
     # The surface carried on past the cube's sides, against not: what it adds can only veto grasps.
+    vetoes = report.split("grasps | clear | success % | vetoed")[1].split("\n\n")[0].strip().splitlines()[1:]
+    assert [line.split("|")[0].strip() for line in vetoes] == ["network's grasps", "surface's pairs"], report
+    assert all(int(line.split("|")[3]) <= int(line.split("|")[1]) for line in vetoes)
     sides = report.split("surface | looks answered |")[1].split("\n\n")[0].strip().splitlines()[1:]
     assert [line.split("|")[0].strip() for line in sides] == ["not carried on", "carried on past the sides"]
     assert int(sides[1].split("|")[1]) <= int(sides[0].split("|")[1]) and "paired over" in sides[1], report
