@@ -66,15 +66,19 @@ def check_grasps(
     grip_config: GripConfig = GripConfig(),  # noqa: B008 (frozen: one shared default is safe)
     alternatives: bool = True,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
+    past_sides: bool = True,
 ) -> Checked:
     """Run the clearance check on ``surface`` (world-frame points; None: not run) and the grip check
     on ``grid`` (the network's input; None: not run) over ``grasps`` (world frame, best first),
     trying :data:`ALTERNATIVES` for the dropped ones when ``alternatives``. The clearance check (its
     settings ``clearance``) also drops grasps whose open fingers reach outside the workspace cube
-    (``workspace_size``, m)."""
+    (``workspace_size``, m), and takes the surface to go on past the cube's sides where it meets them
+    unless told not to (``past_sides``)."""
     if not grasps or (surface is None and grid is None):
         return Checked(list(grasps), _count(surface, 0), _count(grid, 0), 0, _count(surface, 0))
-    seen = observed_for_checks(surface, grid, voxel_size, workspace_pose, workspace_size, clearance)
+    seen = observed_for_checks(
+        surface, grid, voxel_size, workspace_pose, workspace_size, clearance, past_sides=past_sides
+    )
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     orientations = Rotation.from_quat([g.orientation for g in grasps])
     inside, approach_clear, measure = _stages(positions, orientations, seen)
@@ -150,17 +154,18 @@ def clear_of(
     workspace_size: float,
     clearance: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
     spacing: float | None = None,
+    past_sides: bool = True,
 ) -> list[Grasp]:
     """The ``grasps`` whose open hand's approach misses ``points`` (world frame, ``spacing`` m apart;
     default ``voxel_size``), judged as :func:`check_grasps` judges its surface with ``clearance``: the
     support plane (found on ``grid``; None: none) may meet the fingertips in the approach's last
     :data:`SUPPORT_CONTACT_TOLERANCE`. The surface's antipodal pairs are cleared so against the fine
     cloud they were found on, whose 2.5 mm surface shows what brushes past the fingers between the
-    grid's 7.5 mm crossings."""
+    grid's 7.5 mm crossings. ``past_sides`` as :func:`check_grasps` takes it."""
     if not grasps:
         return []
     seen = observed_for_checks(np.asarray(points, dtype=np.float64).reshape(-1, 3), grid, voxel_size, workspace_pose,
-                     workspace_size, clearance, spacing)  # fmt: skip
+                               workspace_size, clearance, spacing, past_sides)  # fmt: skip
     positions = np.array([g.position for g in grasps], dtype=np.float64)
     clear = _approach_clear(positions, np.array([g.orientation for g in grasps], dtype=np.float64), seen)
     return [g for g, ok in zip(grasps, clear, strict=True) if ok]

@@ -324,10 +324,13 @@ class PlanningService:
             threshold = resolved_threshold(query, network.default_threshold)
 
         margin = ClearanceConfig()  # the clearance check's, relaxed below where it leaves nothing
+        past_sides = (
+            True  # the surface taken to go on past the cube's sides, dropped below where it leaves nothing
+        )
 
         def checked_of(candidates: list[Grasp], grip_grid: np.ndarray | None = grid) -> Checked:
             return check_grasps(candidates, surface, grip_grid, voxel_size, workspace_pose, workspace_size,
-                                self.grip_config, self.settings.alternatives, margin)  # fmt: skip
+                                self.grip_config, self.settings.alternatives, margin, past_sides)  # fmt: skip
 
         cloud: np.ndarray | None = observed if baseline else None
 
@@ -347,7 +350,7 @@ class PlanningService:
                 return checked
             hand = replace(margin, min_points=NETWORK_FINE_MIN_POINTS) if network else margin
             kept = clear_of(checked.grasps, fine_cloud()[:, :3], support_grid, voxel_size, workspace_pose,
-                            workspace_size, hand, workspace_size / self.settings.cloud_resolution)  # fmt: skip
+                            workspace_size, hand, workspace_size / self.settings.cloud_resolution, past_sides)  # fmt: skip
             dropped = (checked.clearance_dropped or 0) + len(checked.grasps) - len(kept)
             return replace(checked, grasps=kept, clearance_dropped=dropped)
 
@@ -400,6 +403,11 @@ class PlanningService:
         if surface is not None and not checked.grasps and margin.margin > FALLBACK_MARGIN:
             # Nothing clears the wider hand: what clears the narrower one, rather than nothing.
             margin = replace(margin, margin=FALLBACK_MARGIN)
+            checked, answering, answered_threshold, fallback = answer()
+        if surface is not None and not checked.grasps:
+            # Nothing clears the surface carried on past the cube's sides either: what clears the surface
+            # as observed, rather than nothing (an object across a side is otherwise never offered).
+            past_sides = False
             checked, answering, answered_threshold, fallback = answer()
         model, threshold = answering, answered_threshold
         grasps = in_requested_region(checked.grasps, query, workspace_pose)[: query.max_grasps]
