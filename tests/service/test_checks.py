@@ -368,6 +368,9 @@ def test_an_object_sticking_out_of_the_cube_is_taken_to_go_on_past_its_side():
     surface = grid_surface_points(grid, VOXEL)
     result = check_grasps([leaning], surface, None, VOXEL, np.eye(4), SIZE, STRICT, False)
     assert result.grasps == [] and (result.workspace_dropped, result.clearance_dropped) == (0, 1)
+    # Told not to carry it on (the service's last resort where nothing else clears), the check keeps it.
+    observed = check_grasps([leaning], surface, None, VOXEL, np.eye(4), SIZE, STRICT, False, past_sides=False)
+    assert observed.grasps == [leaning]
     # What the cube shows of that object does not meet the hand: what goes on past the side does.
     tolerance = contact_tolerances(surface, np.eye(4), support_height(grid, VOXEL), VOXEL)
     assert approach_is_clear(surface, [leaning.position], [leaning.orientation], point_tolerance=tolerance)[0]
