@@ -203,8 +203,8 @@ def observed_for_checks(
     past_sides: bool = True,
 ) -> ObservedScene:
     """What grasps are judged against; ``surface``'s points lie ``spacing`` m apart (default: the
-    grid's crossings, ``voxel_size``) and, with ``past_sides`` (the service's way; a replay may leave
-    it out to compare), go on past the cube's sides where they meet them."""
+    grid's crossings, ``voxel_size``) and, with ``past_sides`` (the service's way but for its last
+    resort, where nothing clears so), go on past the cube's sides where they meet them."""
     to_workspace = np.linalg.inv(np.asarray(workspace_pose, dtype=np.float64))
     support = None if grid is None else support_height(grid, voxel_size)
     tolerance = None
