@@ -579,9 +579,6 @@ def _tier_answers(
     grid, grasps, pairs = look["grid"], look["grasps"], look["pairs"]
     faces = grid_surface_cloud(grid, voxel_size)
 
-    def cleared(rows: np.ndarray, seen: ObservedScene, config: ClearanceConfig = clearance) -> np.ndarray:
-        return _cleared(rows, seen, config)
-
     def gripping(rows: np.ndarray, indices: np.ndarray) -> np.ndarray:
         if not len(indices):
             return indices
@@ -599,9 +596,9 @@ def _tier_answers(
     surface = observed_for_checks(
         grid_surface_points(grid, voxel_size), grid, voxel_size, np.eye(4), size, past_sides=past_sides
     )
-    grasps_clear = (grasps[:, 9] > 0) & cleared(grasps, surface)
+    grasps_clear = (grasps[:, 9] > 0) & _cleared(grasps, surface, clearance)
     checked = gripping(grasps, np.flatnonzero((grasps[:, 8] >= DEFAULT_THRESHOLD) & grasps_clear))
-    every_pair = np.flatnonzero(cleared(pairs, surface))
+    every_pair = np.flatnonzero(_cleared(pairs, surface, clearance))
     gripping_pairs = gripping(pairs, every_pair)
     pair_answers = {
         "pairs": gripping_pairs,
@@ -610,8 +607,8 @@ def _tier_answers(
         "every grid pair": opposed(pairs, every_pair, faces, grid_cone),
     }
     fine_cloud = _fine_cloud_seen(look, voxel_size, past_sides)
-    pairs_fine_clear = cleared(pairs, fine_cloud)
-    grasps_fine_clear = cleared(grasps, fine_cloud, replace(clearance, min_points=NETWORK_FINE_MIN_POINTS))
+    pairs_fine_clear = _cleared(pairs, fine_cloud, clearance)
+    grasps_fine_clear = _cleared(grasps, fine_cloud, replace(clearance, min_points=NETWORK_FINE_MIN_POINTS))
     network_answers = {
         "checked": checked,
         "cloud": opposed(grasps, checked, look["cloud"], fine_cone),

@@ -324,9 +324,8 @@ class PlanningService:
             threshold = resolved_threshold(query, network.default_threshold)
 
         margin = ClearanceConfig()  # the clearance check's, relaxed below where it leaves nothing
-        past_sides = (
-            True  # the surface taken to go on past the cube's sides, dropped below where it leaves nothing
-        )
+        # The surface taken to go on past the cube's sides; dropped below where it leaves nothing.
+        past_sides = True
 
         def checked_of(candidates: list[Grasp], grip_grid: np.ndarray | None = grid) -> Checked:
             return check_grasps(candidates, surface, grip_grid, voxel_size, workspace_pose, workspace_size,
