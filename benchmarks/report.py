@@ -50,6 +50,7 @@ from typing import Any
 
 from benchmarks.failures import failures_page
 from benchmarks.paper import PAPER_TABLE_1, SCENARIOS
+from sim_worker.metrics import wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "docs" / "results"
@@ -229,12 +230,109 @@ def clutter_page(results: Path) -> str:
     shipped = headline_folders(results)
     others = len(runs) - len(shipped)
     text = clutter_tables([run for run in runs if run[0] in shipped], results)
+    pooled = seeds_pooled_table(results)
+    if pooled:
+        text += "\n" + pooled
     if others:
         text += (
             f"\nThe other {others} result folders (earlier models, controls and experiments) are on the "
             "[Experiments](experiments.md) page, grouped by the question each answers.\n"
         )
     return text
+
+
+#: How a results folder that repeats another on a further seed is named: ``seed-N-`` and the name
+#: of the seed-1 folder whose command it ran again with ``--seed N``, on the same code.
+SEED_REPEAT = "seed-{seed}-{name}"
+
+
+def seed_repeats(results: Path) -> dict[Path, list[tuple[Path, list[dict[str, Any]]]]]:
+    """The README's folders that have repeats on other seeds (:data:`SEED_REPEAT`), each with its
+    own run first, then the repeats by seed; a repeat whose settings line names another seed than
+    its name, or that carries a ``variant.md``, is left out."""
+    runs = dict(clutter_runs(results))
+    repeats: dict[Path, list[tuple[Path, list[dict[str, Any]]]]] = {}
+    for folder in sorted(headline_folders(results)):
+        name = relative(folder, results)
+        found = [
+            (other, rows)
+            for other, rows in runs.items()
+            if (seed := run_seed(other)) not in (None, HEADLINE_SEED)
+            and relative(other, results) == SEED_REPEAT.format(seed=seed, name=name)
+            and not variant(other)
+        ]
+        if found:
+            repeats[folder] = [(folder, runs[folder]), *sorted(found, key=lambda run: run_seed(run[0]) or 0)]
+    return repeats
+
+
+def same_request(row: dict[str, Any], other: dict[str, Any]) -> bool:
+    """Whether two rows ran one planner, selection, scenario and threshold (pooled across seeds)."""
+    keys = ("planner", "selection", "scenario", "threshold")
+    return all(row.get(key) == other.get(key) for key in keys)
+
+
+def pooled_row(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """One planner's rows of several seeds as one: attempts, objects and rounds summed, success and
+    cleared with 95 % Wilson intervals over the sums, the share of rounds that offered no grasp
+    (None where a seed did not record it)."""
+    attempts, successes = sum(r["attempts"] for r in rows), sum(r["successes"] for r in rows)
+    placed, cleared = sum(r["objects_placed"] for r in rows), sum(r["objects_cleared"] for r in rows)
+    rounds = sum(r["rounds"] for r in rows)
+    shares = [r.get("no_grasp_rate") for r in rows]
+    no_grasp = (
+        None if None in shares else sum(s * r["rounds"] for s, r in zip(shares, rows, strict=True)) / rounds
+    )
+    return {
+        "rounds": rounds,
+        "success_rate": 100 * successes / attempts if attempts else None,
+        "success_rate_ci95": list(wilson_interval(successes, attempts)),
+        "percent_cleared": 100 * cleared / placed if placed else None,
+        "percent_cleared_ci95": list(wilson_interval(cleared, placed)),
+        "no_grasp_rate": no_grasp,
+    }
+
+
+def seeds_pooled_table(results: Path) -> str:
+    """The README's rows that were run again on other seeds, each planner's seeds pooled (:func:`pooled_row`),
+    with every seed's own success beside them; "" where none was."""
+    lines: list[tuple[tuple[int, str, bool], str]] = []
+    for folder, runs in seed_repeats(results).items():
+        for row in runs[0][1]:
+            same = [
+                (run_seed(other) or HEADLINE_SEED, match)
+                for other, rows in runs
+                for match in rows
+                if same_request(match, row)
+            ]
+            if len(same) < 2 or any(match.get("attempts") is None for _, match in same):
+                continue
+            pooled = pooled_row([match for _, match in same])
+            by_seed = ", ".join(f"{seed}: {match['success_rate']:.1f}" for seed, match in same)
+            scenario = scenario_label(folder, row)
+            order = (SCENARIO_ORDER.index(row["scenario"]) if row["scenario"] in SCENARIO_ORDER else 99, scenario,
+                     row["planner"].startswith("antipodal"))  # fmt: skip
+            lines.append(
+                (
+                    order,
+                    f"| {scenario} | {cell(row['planner'])} | {len(same)} | {pooled['rounds']} | "
+                    f"{pct(pooled['success_rate'], pooled['success_rate_ci95'])} | "
+                    f"{pct(pooled['percent_cleared'], pooled['percent_cleared_ci95'])} | {no_grasp_cell(pooled)} | "
+                    f"{by_seed} |",
+                )
+            )
+    if not lines:
+        return ""
+    header = [
+        "#### Seeds pooled\n",
+        f"The README's rows whose command was run again with other seeds (other draws of scenes; result "
+        f"folders named `{SEED_REPEAT.format(seed='N', name='NAME')}`, NAME the seed-1 folder), each "
+        "planner's attempts, objects and rounds summed over the seeds:\n",
+        "| scenario | planner | seeds | rounds | success % (95 % CI) | cleared % (95 % CI) "
+        "| no grasp offered % of rounds | success % by seed |",
+        "| --- | --- | ---: | ---: | --- | --- | ---: | --- |",
+    ]
+    return "\n".join([*header, *(line for _, line in sorted(lines))]) + "\n"
 
 
 #: The experiments' groups, by result folder name prefix (the first that matches), each with the

@@ -306,3 +306,46 @@ def test_the_benchmark_page_holds_the_shipped_model_and_experiments_their_own_pa
         < experiments.index("## Other runs")
         < experiments.index("new-idea")
     )
+
+
+def test_repeats_on_other_seeds_are_pooled_with_the_readmes_run(tmp_path: Path, monkeypatch):
+    """A folder named ``seed-N-NAME`` that ran seed N is pooled with NAME's run, planner by planner:
+    sums over the seeds, not a mean of rates; a repeat with a ``variant.md`` or a settings line of
+    another seed is left out."""
+    monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
+    baseline = {
+        **ROW,
+        "planner": "antipodal+clearance",
+        "model": "antipodal",
+        "successes": 300,
+        "success_rate": 77.7,
+    }
+    clutter_results(
+        tmp_path / "xsrc", [ROW, baseline], settings="seed 1, six view(s), pile objects pybullet_data"
+    )
+    again = {**ROW, "attempts": 100, "successes": 90, "success_rate": 90.0, "objects_placed": 100,
+             "objects_cleared": 90, "rounds": 20, "no_grasp_rate": 10.0}  # fmt: skip
+    clutter_results(
+        tmp_path / "seed-2-xsrc", [again], settings="seed 2, six view(s), pile objects pybullet_data"
+    )
+    clutter_results(
+        tmp_path / "seed-3-xsrc", [again], settings="seed 3, six view(s), pile objects pybullet_data"
+    )
+    (tmp_path / "seed-3-xsrc" / "bench-a" / "variant.md").write_text("A changed service.\n")
+    clutter_results(
+        tmp_path / "seed-4-xsrc", [again], settings="seed 5, six view(s), pile objects pybullet_data"
+    )
+    page = report.clutter_page(tmp_path)
+    assert "#### Seeds pooled" in page
+    line = next(line for line in page.splitlines() if line.startswith("| pile-5, cross-source objects | vgn"))
+    low, high = report.wilson_interval(217 + 90, 386 + 100)
+    assert f"| 2 | 120 | 63.2 ({low:.1f}-{high:.1f}) |" in line, (
+        "successes summed over attempts, seeds 1 and 2 only"
+    )
+    assert "| 52.1 (" in line and line.endswith("| - | 1: 56.2, 2: 90.0 |"), (
+        "one seed without no-grasp shares: -"
+    )
+    assert not any(
+        line.startswith("| pile-5, cross-source objects | antipodal") for line in page.splitlines()
+    ), "a planner no other seed ran has nothing to pool"
+    assert "Seeds pooled" not in report.clutter_page(tmp_path / "xsrc"), "no repeats: no section"
