@@ -577,7 +577,8 @@ def headline_table(results: Path) -> str | None:
     lines.append(
         "Success % / cleared % / rounds that ended with no grasp offered while objects remained % (`-`: "
         "not recorded), random selection, from the result files in `docs/results/` "
-        "(`python -m benchmarks.report`); intervals, settings, dates and machines: "
+        "(`python -m benchmarks.report`); intervals, settings, dates and machines, and rows run on other seeds "
+        "pooled: "
         "[Simulation and benchmark](docs/benchmark.md#results)."
     )
     return "\n".join(lines) + "\n"
