@@ -39,6 +39,7 @@ from service.launch.embedded import EmbeddedService
 from sim_worker.clear_scene import grasp_defaults, resolve_planner, run_episode
 from sim_worker.clutter import ClutterConfig, looking
 from sim_worker.metrics import FAILURE_CLASSES, summarize
+from sim_worker.objects import DEFAULT_OBJECT_SET
 from sim_worker.results import ResultsFolder
 from vgn_contract.gripper_description import DEFAULT_GRIPPER
 from vgn_contract.schemas import ANTIPODAL_DEFAULT_THRESHOLD, SWITCHES, GraspDefaults
@@ -253,13 +254,14 @@ def format_row(row: dict) -> str:
 
 def objects_text(args: argparse.Namespace) -> str:
     """Which objects the run's pile and packed scenes drop, for the settings line: a folder by its
-    name, else ``pybullet_data`` (a source no training scene draws from). Blocks say nothing."""
+    name, a named set by its name, and the pybullet set, named or by default, as ``pybullet_data``
+    (a source no training scene draws from), as the report knows it. Blocks say nothing."""
     folders = {"pile": args.pile_objects, "packed": args.packed_objects}
     scenes = [scene for scene in folders if any(s.rsplit("-", 1)[0] == scene for s in args.scenarios)]
-    names = [
-        f"{scene} objects {Path(folders[scene]).name if folders[scene] else 'pybullet_data'}"
-        for scene in scenes
-    ]
+    names = []
+    for scene in scenes:
+        chosen = str(folders[scene] or DEFAULT_OBJECT_SET[scene])
+        names.append(f"{scene} objects {'pybullet_data' if chosen == 'pybullet' else Path(chosen).name}")
     return ", ".join(names)
 
 

@@ -67,6 +67,10 @@ def test_the_settings_line_names_the_objects_of_the_scenes_run() -> None:
     assert settings("--scenarios", "pile-5", "packed-5", "--pile-objects", "/x/heldout").endswith(
         "pile objects heldout, packed objects pybullet_data"
     )
+    assert settings("--scenarios", "pile-5", "--pile-objects", "pybullet").endswith(
+        "pile objects pybullet_data"
+    ), "the pybullet set by name reads as by default: the report tells cross-source rows by it"
+    assert settings("--scenarios", "pile-5", "--pile-objects", "shapes").endswith("pile objects shapes")
     assert "objects" not in settings("--scenarios", "blocks-5")
 
 
