@@ -42,6 +42,7 @@ import datetime
 import json
 import os
 import platform
+import re
 import sys
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -230,7 +231,7 @@ def clutter_page(results: Path) -> str:
     shipped = headline_folders(results)
     others = len(runs) - len(shipped)
     text = clutter_tables([run for run in runs if run[0] in shipped], results)
-    pooled = seeds_pooled_table(results)
+    pooled = seeds_pooled_table(runs, shipped, results)
     if pooled:
         text += "\n" + pooled
     if others:
@@ -244,26 +245,35 @@ def clutter_page(results: Path) -> str:
 #: How a results folder that repeats another on a further seed is named: ``seed-N-`` and the name
 #: of the seed-1 folder whose command it ran again with ``--seed N``, on the same code.
 SEED_REPEAT = "seed-{seed}-{name}"
+SEED_REPEAT_NAME = re.compile(r"seed-(\d+)-(.+)")
+
+#: A results folder's run: the folder and its table's rows.
+Run = tuple[Path, list[dict[str, Any]]]
 
 
-def seed_repeats(results: Path) -> dict[Path, list[tuple[Path, list[dict[str, Any]]]]]:
-    """The README's folders that have repeats on other seeds (:data:`SEED_REPEAT`), each with its
-    own run first, then the repeats by seed; a repeat whose settings line names another seed than
-    its name, or that carries a ``variant.md``, is left out."""
-    runs = dict(clutter_runs(results))
-    repeats: dict[Path, list[tuple[Path, list[dict[str, Any]]]]] = {}
-    for folder in sorted(headline_folders(results)):
-        name = relative(folder, results)
-        found = [
-            (other, rows)
-            for other, rows in runs.items()
-            if (seed := run_seed(other)) not in (None, HEADLINE_SEED)
-            and relative(other, results) == SEED_REPEAT.format(seed=seed, name=name)
-            and not variant(other)
-        ]
-        if found:
-            repeats[folder] = [(folder, runs[folder]), *sorted(found, key=lambda run: run_seed(run[0]) or 0)]
-    return repeats
+def seed_repeats(runs: list[Run], shipped: set[Path], results: Path) -> dict[Path, list[tuple[int, Run]]]:
+    """The ``shipped`` folders (the README's) that have repeats on other seeds among ``runs``
+    (:data:`SEED_REPEAT`), each with its own run first, then the repeats by seed; a repeat whose
+    settings line names another seed than its name, or that carries a ``variant.md``, is left out."""
+    by_name = {relative(folder, results): (folder, rows) for folder, rows in runs}
+    repeats: dict[Path, list[tuple[int, Run]]] = {}
+    for name, run in sorted(by_name.items()):
+        match = SEED_REPEAT_NAME.fullmatch(name)
+        if match is None or match[2] not in by_name or by_name[match[2]][0] not in shipped:
+            continue
+        seed = int(match[1])
+        if seed == HEADLINE_SEED or run_seed(run[0]) != seed or variant(run[0]):
+            continue
+        original = by_name[match[2]]
+        repeats.setdefault(original[0], [(HEADLINE_SEED, original)]).append((seed, run))
+    return {folder: sorted(found, key=lambda entry: entry[0]) for folder, found in repeats.items()}
+
+
+def scenario_order(label: str) -> tuple[int, str]:
+    """Where a scenario label (``pile-5, closed loop``) stands in tables: the paper's order of
+    scenarios, then by name."""
+    scenario = label.split(",")[0]
+    return (SCENARIO_ORDER.index(scenario) if scenario in SCENARIO_ORDER else 99, label)
 
 
 def same_request(row: dict[str, Any], other: dict[str, Any]) -> bool:
@@ -293,28 +303,23 @@ def pooled_row(rows: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def seeds_pooled_table(results: Path) -> str:
-    """The README's rows that were run again on other seeds, each planner's seeds pooled (:func:`pooled_row`),
-    with every seed's own success beside them; "" where none was."""
-    lines: list[tuple[tuple[int, str, bool], str]] = []
-    for folder, runs in seed_repeats(results).items():
-        for row in runs[0][1]:
-            same = [
-                (run_seed(other) or HEADLINE_SEED, match)
-                for other, rows in runs
-                for match in rows
-                if same_request(match, row)
-            ]
+def seeds_pooled_table(runs: list[Run], shipped: set[Path], results: Path) -> str:
+    """The README's rows that were run again on other seeds (:func:`seed_repeats`), each planner's
+    seeds pooled (:func:`pooled_row`), with every seed's own success beside them; "" where none was."""
+    lines: list[tuple[tuple[int, str], bool, str]] = []
+    for folder, seeds in seed_repeats(runs, shipped, results).items():
+        _, (_, own_rows) = seeds[0]
+        for row in own_rows:
+            same = [(seed, match) for seed, (_, rows) in seeds for match in rows if same_request(match, row)]
             if len(same) < 2 or any(match.get("attempts") is None for _, match in same):
                 continue
             pooled = pooled_row([match for _, match in same])
             by_seed = ", ".join(f"{seed}: {match['success_rate']:.1f}" for seed, match in same)
             scenario = scenario_label(folder, row)
-            order = (SCENARIO_ORDER.index(row["scenario"]) if row["scenario"] in SCENARIO_ORDER else 99, scenario,
-                     row["planner"].startswith("antipodal"))  # fmt: skip
             lines.append(
                 (
-                    order,
+                    scenario_order(scenario),
+                    row["planner"].startswith("antipodal"),
                     f"| {scenario} | {cell(row['planner'])} | {len(same)} | {pooled['rounds']} | "
                     f"{pct(pooled['success_rate'], pooled['success_rate_ci95'])} | "
                     f"{pct(pooled['percent_cleared'], pooled['percent_cleared_ci95'])} | {no_grasp_cell(pooled)} | "
@@ -332,7 +337,7 @@ def seeds_pooled_table(results: Path) -> str:
         "| no grasp offered % of rounds | success % by seed |",
         "| --- | --- | ---: | ---: | --- | --- | ---: | --- |",
     ]
-    return "\n".join([*header, *(line for _, line in sorted(lines))]) + "\n"
+    return "\n".join([*header, *(line for *_, line in sorted(lines))]) + "\n"
 
 
 #: The experiments' groups, by result folder name prefix (the first that matches), each with the
@@ -561,8 +566,7 @@ def headline_table(results: Path) -> str | None:
         return None
     # VGN plain first, then by the options added; the weight-free baseline last.
     planners.sort(key=lambda planner: (planner.startswith("antipodal"), planner.count("+")))
-    scenarios = sorted({s for s, _ in cells}, key=lambda s: (SCENARIO_ORDER.index(s.split(",")[0])
-                       if s.split(",")[0] in SCENARIO_ORDER else 99, s))  # fmt: skip
+    scenarios = sorted({s for s, _ in cells}, key=scenario_order)
     lines = [
         "| scenario | " + " | ".join(f"`{p}`" for p in planners) + " | paper's VGN |",
         "| --- |" + " --- |" * len(planners) + " --- |",
