@@ -5,7 +5,7 @@ the objects or piled on the few the hand cannot hold, which decide where effort 
 
     python -m benchmarks.failures RUN_FOLDER [RUN_FOLDER ...]   # the tables of each folder with grasps.csv
 
-``benchmarks.report`` puts the tables of every ``docs/results/**/grasps.csv`` that names the objects
+``benchmarks.report`` puts the tables of every ``docs/results/*/grasps.csv`` that names the objects
 (``closed_on``, recorded since that column exists) on the benchmark page.
 """
 
@@ -18,6 +18,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks.published import published
 from sim_worker.results import read_csv
 
 #: How an attempt that closed on no object is listed.
@@ -136,7 +137,7 @@ def run_title(folder: Path) -> str:
 def failures_page(results: Path) -> str:
     """The table of every results folder under ``results`` whose ``grasps.csv`` names the objects."""
     sections = []
-    for path in sorted(results.rglob("grasps.csv")):
+    for path in published(results, "grasps.csv"):
         rows = read_csv(path)
         if names_objects(rows):
             sections.append(f"**{run_title(path.parent)}**\n\n{folder_tables(path.parent, rows)}")

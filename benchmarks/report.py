@@ -7,7 +7,7 @@ the reference pages that follow the code (configuration, HTTP endpoints, the mod
 
 Inputs:
 
-- ``docs/results/**/table.json``: ``python -m benchmarks.clutter --out FOLDER`` writes it (one row
+- ``docs/results/*/table.json``: ``python -m benchmarks.clutter --out FOLDER`` writes it (one row
   per planner, selection and scenario, with 95 % Wilson intervals, and the date and machine the
   rounds ran on); copy the folder, or just its ``table.json`` and ``table.md``, under
   ``docs/results/``. Every folder becomes one table: on the benchmark page (``clutter.md``) when
@@ -15,9 +15,9 @@ Inputs:
   (``experiments.md``), grouped by name prefix under :data:`EXPERIMENT_GROUPS`' questions. A
   ``variant.md`` beside it says how the service under test differed from the shipped code (a
   control): the table shows it and the README's table leaves the folder out.
-- ``docs/results/**/latency.json``: ``python -m benchmarks.latency --json FOLDER/latency.json``.
+- ``docs/results/*/latency.json``: ``python -m benchmarks.latency --json FOLDER/latency.json``.
   Every file becomes one table on the performance page.
-- ``docs/results/**/device_planning.json``: ``python -m benchmarks.device_planning time VOLUME.npz
+- ``docs/results/*/device_planning.json``: ``python -m benchmarks.device_planning time VOLUME.npz
   --json FOLDER/device_planning.json`` (a request's planning steps on CPU and GPU; the date and
   machine are in the file).
 - ``measured.json`` beside either (``{"date": "YYYY-MM-DD", "time": "HH:MM:SS", "cpu": "...", "cores": N}``, UTC): when and
@@ -27,9 +27,9 @@ Inputs:
   ``service/models/vgn.card.json`` (the shipped model's card).
 
 Outputs in ``docs/generated/`` (included into the pages by ``pymdownx.snippets``): ``clutter.md``,
-``experiments.md``, ``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/**/fleet.json``: ``python -m benchmarks.fleet``),
+``experiments.md``, ``latency.md``, ``device-planning.md``, ``fleet.md`` (from ``docs/results/*/fleet.json``: ``python -m benchmarks.fleet``),
 ``operating-curves.md`` (clutter results of one model and request at several thresholds; drawn by
-``python -m benchmarks.operating_curve``), ``failures-by-object.md`` (from ``docs/results/**/grasps.csv``:
+``python -m benchmarks.operating_curve``), ``failures-by-object.md`` (from ``docs/results/*/grasps.csv``:
 ``python -m benchmarks.failures``), ``configuration.md``, ``http-endpoints.md``, ``model-card.md``. Where clutter
 results exist, the block between ``<!-- results:begin -->`` and ``<!-- results:end -->`` in
 README.md is rewritten with the headline table too (without dates: the benchmark page carries them).
@@ -51,6 +51,7 @@ from typing import Any
 
 from benchmarks.failures import failures_page
 from benchmarks.paper import PAPER_TABLE_1, SCENARIOS
+from benchmarks.published import published
 from sim_worker.metrics import wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -176,7 +177,7 @@ def row_measured(row: dict[str, Any], folder: Path) -> dict[str, Any] | None:
 def clutter_runs(results: Path) -> list[tuple[Path, list[dict[str, Any]]]]:
     """(folder, rows) of every ``table.json`` under ``results``, in path order."""
     runs = []
-    for path in sorted(results.rglob("table.json")):
+    for path in published(results, "table.json"):
         rows = json.loads(path.read_text())
         if isinstance(rows, list) and rows:
             runs.append((path.parent, rows))
@@ -600,7 +601,7 @@ def readme_with_headline(readme: str, table: str | None) -> str:
 # Latency --------------------------------------------------------------------------------------
 def latency_runs(results: Path) -> list[tuple[Path, dict[str, Any]]]:
     """(file, report) of every ``latency.json`` under ``results``."""
-    return [(path, json.loads(path.read_text())) for path in sorted(results.rglob("latency.json"))]
+    return [(path, json.loads(path.read_text())) for path in published(results, "latency.json")]
 
 
 def latency_measured(path: Path, report: dict[str, Any]) -> dict[str, Any] | None:
@@ -697,7 +698,7 @@ def device_planning_table(runs: list[dict[str, Any]]) -> str:
 
 def device_planning_page(results: Path) -> str:
     """Every ``device_planning.json``: where it ran, and its table."""
-    paths = sorted(results.rglob("device_planning.json"))
+    paths = published(results, "device_planning.json")
     if not paths:
         return "No `device_planning.json` result files are in `docs/results/` yet.\n"
     parts = []
@@ -718,7 +719,7 @@ def device_planning_page(results: Path) -> str:
 def fleet_page(results: Path) -> str:
     """Every ``fleet.json`` (``python -m benchmarks.fleet``): the proxy's added latency and the
     throughput of one and two replicas."""
-    runs = [(path, json.loads(path.read_text())) for path in sorted(results.rglob("fleet.json"))]
+    runs = [(path, json.loads(path.read_text())) for path in published(results, "fleet.json")]
     if not runs:
         return (
             "No fleet result files are in `docs/results/` yet. Run `python -m benchmarks.fleet --json "
@@ -1023,7 +1024,7 @@ def training_data_page(manifest: dict[str, Any], results: Path) -> str:
             )
             parts.append(f"| {source} | {record['scenes']:,} | {record['converted']:,} | {why} |")
     parts += paired_comparison(results)
-    for path in sorted(results.glob("**/recipe-training.json")):
+    for path in published(results, "recipe-training.json"):
         run = json.loads(path.read_text())
         render, epoch = run["rendering"], run["epoch"]
         median = {arm: sorted(values)[len(values) // 2] for arm, values in epoch["seconds"].items()}
@@ -1154,15 +1155,15 @@ def curves_page(results: Path) -> str:
 def pages(results: Path) -> dict[str, tuple[str, Callable[[], str]]]:
     """Generated file name -> (its source, for the header; the function that makes its text)."""
     return {
-        "clutter.md": ("docs/results/**/table.json", lambda: clutter_page(results)),
-        "experiments.md": ("docs/results/**/table.json", lambda: experiments_page(results)),
-        "latency.md": ("docs/results/**/latency.json", lambda: latency_page(results)),
-        "device-planning.md": ("docs/results/**/device_planning.json", lambda: device_planning_page(results)),
-        "fleet.md": ("docs/results/**/fleet.json", lambda: fleet_page(results)),
-        "operating-curves.md": ("docs/results/**/table.json", lambda: curves_page(results)),
-        "failures-by-object.md": ("docs/results/**/grasps.csv", lambda: failures_page(results)),
+        "clutter.md": ("docs/results/*/table.json", lambda: clutter_page(results)),
+        "experiments.md": ("docs/results/*/table.json", lambda: experiments_page(results)),
+        "latency.md": ("docs/results/*/latency.json", lambda: latency_page(results)),
+        "device-planning.md": ("docs/results/*/device_planning.json", lambda: device_planning_page(results)),
+        "fleet.md": ("docs/results/*/fleet.json", lambda: fleet_page(results)),
+        "operating-curves.md": ("docs/results/*/table.json", lambda: curves_page(results)),
+        "failures-by-object.md": ("docs/results/*/grasps.csv", lambda: failures_page(results)),
         "training-data.md": (
-            "data/manifest.json, docs/results/**/recipe-training.json",
+            "data/manifest.json, docs/results/*/recipe-training.json",
             lambda: training_data_page(json.loads(DATA_MANIFEST.read_text()), results),
         ),
         "configuration.md": ("service/settings.py", configuration_page),

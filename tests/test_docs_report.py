@@ -22,9 +22,9 @@ README = "# x\n\nintro\n\n<!-- results:begin -->\nold table\n<!-- results:end --
 
 
 def clutter_results(
-    root: Path, rows: list[dict], settings: str = "seed 1, rounds per scenario 100, six view(s)"
+    folder: Path, rows: list[dict], settings: str = "seed 1, rounds per scenario 100, six view(s)"
 ) -> Path:
-    folder = root / "bench-a"
+    """A result folder as ``benchmarks.clutter`` publishes it: its table, under the results root."""
     folder.mkdir(parents=True)
     (folder / "table.json").write_text(json.dumps(rows))
     (folder / "table.md").write_text(f"{settings}\n\n| planner | ... |\n")
@@ -33,7 +33,7 @@ def clutter_results(
 
 def test_clutter_table_has_intervals_failures_and_where_it_was_measured(tmp_path: Path, monkeypatch):
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
-    clutter_results(tmp_path, [ROW])
+    clutter_results(tmp_path / "bench-a", [ROW])
     page = report.clutter_page(tmp_path)
     assert "#### `bench-a`" in page
     assert "seed 1, rounds per scenario 100, six view(s)" in page and "`0123456789ab`" in page
@@ -46,7 +46,7 @@ def test_clutter_table_has_intervals_failures_and_where_it_was_measured(tmp_path
 def test_a_row_without_a_record_takes_the_folders_measured_json(tmp_path: Path, monkeypatch):
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     row = {key: value for key, value in ROW.items() if key != "measured"}
-    folder = clutter_results(tmp_path, [row])
+    folder = clutter_results(tmp_path / "bench-a", [row])
     assert "date and machine not recorded" in report.clutter_page(tmp_path)
     (folder / "measured.json").write_text(json.dumps({"date": "2031-05-06", "cpu": "Other CPU", "cores": 16}))
     assert "2031-05-06, Other CPU (16 cores)" in report.clutter_page(tmp_path)
@@ -55,7 +55,7 @@ def test_a_row_without_a_record_takes_the_folders_measured_json(tmp_path: Path, 
 def test_headline_table_and_readme_block(tmp_path: Path, monkeypatch):
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     noisy = tmp_path / "noise"
-    clutter_results(tmp_path, [ROW, {**ROW, "scenario": "blocks-5", "planner": "vgn"}])
+    clutter_results(tmp_path / "bench-a", [ROW, {**ROW, "scenario": "blocks-5", "planner": "vgn"}])
     clutter_results(noisy, [ROW], settings="seed 1, rounds per scenario 100, six view(s), depth noise")
     table = report.headline_table(tmp_path)
     assert "| scenario | `vgn` | `vgn+turns+clearance` | paper's VGN |" in table, (
@@ -112,6 +112,9 @@ def test_latency_table_says_which_weights_and_how_many_grasps(tmp_path: Path):
 
 def test_no_results_say_how_to_add_them(tmp_path: Path):
     assert "No clutter-removal result files" in report.clutter_page(tmp_path)
+    # A run's per-scenario folder is not published (docs/results/.gitignore): its table is not read.
+    clutter_results(tmp_path / "run" / "vgn-random-pile-5", [ROW])
+    assert "No clutter-removal result files" in report.clutter_page(tmp_path)
     assert "No latency result files" in report.latency_page(tmp_path)
     assert report.headline_table(tmp_path) is None
 
@@ -119,7 +122,7 @@ def test_no_results_say_how_to_add_them(tmp_path: Path):
 def test_the_command_writes_then_checks(tmp_path: Path, monkeypatch):
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     results, out, readme = tmp_path / "results", tmp_path / "generated", tmp_path / "README.md"
-    clutter_results(results, [ROW])
+    clutter_results(results / "bench-a", [ROW])
     readme.write_text(README)
     argv = [str(results), "--out", str(out), "--readme", str(readme)]
     assert report.main([*argv, "--check"]) == 1, "nothing generated yet"
@@ -152,7 +155,7 @@ def test_the_clutter_benchmark_records_date_and_machine(tmp_path: Path):
 
 def test_the_readme_table_shows_the_packaged_weights_only(tmp_path: Path, monkeypatch):
     monkeypatch.setattr(report, "shipped_model_id", lambda: "shipped00000")
-    clutter_results(tmp_path, [ROW, {**ROW, "model": "shipped00000", "scenario": "packed-5"}])
+    clutter_results(tmp_path / "bench-a", [ROW, {**ROW, "model": "shipped00000", "scenario": "packed-5"}])
     table = report.headline_table(tmp_path)
     assert (
         "| packed-5 | 56.2 / 44.4 / - |" in table and "pile-5" not in table
@@ -160,7 +163,7 @@ def test_the_readme_table_shows_the_packaged_weights_only(tmp_path: Path, monkey
 
 
 def test_paired_comparison_rows_per_arm_and_columns_per_setting(tmp_path: Path):
-    clutter_results(tmp_path, [ROW])  # not a paired-<arm> folder: left out
+    clutter_results(tmp_path / "bench-a", [ROW])  # not a paired-<arm> folder: left out
     noisy = "seed 1, rounds per scenario 100, six view(s), depth noise"
     for arm, rate in (("fixed", 25.7), ("fresh", 40.0)):
         for suffix, settings in (("", "seed 1, rounds per scenario 100, six view(s)"), ("-noise", noisy)):
@@ -243,8 +246,8 @@ def test_a_later_run_of_another_seed_stays_out_of_the_readme(tmp_path: Path, mon
     clutter_results(tmp_path / "b-seed-2", [{**ROW, "success_rate": 41.0, "measured": {"date": day, "time": "18:00:00"}}],
                     settings="seed 2, rounds per scenario 100, six view(s)")  # fmt: skip
     assert "| pile-5 | 56.2 / 44.4 / - | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
-    assert report.run_seed(tmp_path / "b-seed-2" / "bench-a") == 2
-    assert report.run_seed(tmp_path / "a-seed-1" / "bench-a") == report.HEADLINE_SEED
+    assert report.run_seed(tmp_path / "b-seed-2") == 2
+    assert report.run_seed(tmp_path / "a-seed-1") == report.HEADLINE_SEED
 
 
 def test_the_readme_table_keeps_the_operating_threshold(tmp_path: Path, monkeypatch):
@@ -263,7 +266,7 @@ def test_the_share_of_rounds_that_offered_no_grasp_stands_beside_success_and_cle
 ):
     monkeypatch.setattr(report, "shipped_model_id", lambda: ROW["model"])
     recorded = {**ROW, "no_grasp_rate": 37.0}
-    clutter_results(tmp_path, [recorded])
+    clutter_results(tmp_path / "bench-a", [recorded])
     line = next(line for line in report.clutter_page(tmp_path).splitlines() if line.startswith("| vgn+"))
     assert "44.4 (40.0-48.8) | 37 | 72 / 7 / 90 / 0 |" in line
     assert "| pile-5 | 56.2 / 44.4 / 37 | 62.3 / 46.4 |" in report.headline_table(tmp_path).splitlines()
@@ -293,14 +296,14 @@ def test_the_benchmark_page_holds_the_shipped_model_and_experiments_their_own_pa
     clutter_results(tmp_path / "paired-fixed", [{**ROW, "model": "fedcba987654"}])
     clutter_results(tmp_path / "new-idea", [{**ROW, "model": "fedcba987654"}])
     benchmark = report.clutter_page(tmp_path)
-    assert "#### `shipped-default/bench-a`" in benchmark and "paired-" not in benchmark
+    assert "#### `shipped-default`" in benchmark and "paired-" not in benchmark
     assert "56.2 (51.2-61.1)" in benchmark, "intervals stay"
     assert "The other 3 result folders" in benchmark and "(experiments.md)" in benchmark
     experiments = report.experiments_page(tmp_path)
     assert "shipped-default" not in experiments
     question = dict(report.EXPERIMENT_GROUPS)["paired-"]
     assert f"## `paired-*`\n\n{question} (2 result folders)" in experiments
-    assert "### `paired-fresh/bench-a`" in experiments and "### `paired-fixed/bench-a`" in experiments
+    assert "### `paired-fresh`" in experiments and "### `paired-fixed`" in experiments
     assert (
         experiments.index("## `paired-*`")
         < experiments.index("## Other runs")
@@ -331,7 +334,7 @@ def test_repeats_on_other_seeds_are_pooled_with_the_readmes_run(tmp_path: Path, 
     clutter_results(
         tmp_path / "seed-3-xsrc", [again], settings="seed 3, six view(s), pile objects pybullet_data"
     )
-    (tmp_path / "seed-3-xsrc" / "bench-a" / "variant.md").write_text("A changed service.\n")
+    (tmp_path / "seed-3-xsrc" / "variant.md").write_text("A changed service.\n")
     clutter_results(
         tmp_path / "seed-4-xsrc", [again], settings="seed 5, six view(s), pile objects pybullet_data"
     )
@@ -348,4 +351,8 @@ def test_repeats_on_other_seeds_are_pooled_with_the_readmes_run(tmp_path: Path, 
     assert not any(
         line.startswith("| pile-5, cross-source objects | antipodal") for line in page.splitlines()
     ), "a planner no other seed ran has nothing to pool"
-    assert "Seeds pooled" not in report.clutter_page(tmp_path / "xsrc"), "no repeats: no section"
+    alone = tmp_path / "alone"
+    clutter_results(
+        alone / "xsrc", [ROW, baseline], settings="seed 1, six view(s), pile objects pybullet_data"
+    )
+    assert "Seeds pooled" not in report.clutter_page(alone), "no repeats: no section"

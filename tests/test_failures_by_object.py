@@ -84,6 +84,13 @@ def test_the_page_lists_runs_that_name_objects_and_the_command_refuses_older_one
     assert failures.main([str(tmp_path / "missing")]) == 2
 
 
+def test_only_the_files_a_result_folder_publishes_are_read(tmp_path: Path):
+    """A run's per-scenario folder stays out of the repository (docs/results/.gitignore): a page
+    that read it would differ between where the run was made and a fresh clone."""
+    write_run(tmp_path / "results" / "named" / "vgn-random-pile-5", ATTEMPTS)
+    assert "No result folder holds" in failures.failures_page(tmp_path / "results")
+
+
 def test_the_report_writes_the_page(tmp_path: Path):
     write_run(tmp_path / "results" / "named", ATTEMPTS)
     outputs = render_all(tmp_path / "results", tmp_path / "generated", readme=None)

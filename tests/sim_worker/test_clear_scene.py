@@ -420,6 +420,7 @@ def test_benchmark_rows_with_the_clearance_check_are_labelled(tmp_path: Path, mo
     assert json.loads((out / "table.json").read_text()) == rows
 
 
+@pytest.mark.slow
 def test_a_structured_light_sensor_with_pose_error_is_run_and_recorded(tmp_path: Path, monkeypatch):
     """clear-scene through the structured-light model and reported-pose error: both reach the
     service (the baseline plans on what the sensor saw) and config.json records them."""

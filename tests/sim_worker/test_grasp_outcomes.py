@@ -7,11 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from benchmarks import grasp_outcomes
 from sim_worker.grasping import Outcome
 
 
+@pytest.mark.slow
 def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     out = tmp_path / "outcomes"
     argv = ["collect", "--scene", "blocks", "--objects", "blocks", "--object-count", "3", "--rounds", "1",

@@ -264,6 +264,7 @@ def test_six_view_observations_are_the_evaluation_views_and_old_cache_keys_stand
     assert grids.shape == original.shape and not np.array_equal(grids, original)
 
 
+@pytest.mark.slow
 def test_teacher_and_student_see_the_six_views_and_the_card_says_so(raw: Path, tmp_path: Path):
     from service.settings import PACKAGED_MODEL
 
