@@ -689,7 +689,7 @@ def support_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> Non
             if support is None or not len(grasps):
                 continue
             surface = grid_surface_points(grid, voxel_size)
-            tolerance = contact_tolerances(surface, np.eye(4), support, voxel_size)
+            tolerance = contact_tolerances(surface, np.eye(4), support, voxel_size, ClearanceConfig().margin)
             cleared = approach_is_clear(surface, grasps[:, :3], grasps[:, 3:7], point_tolerance=tolerance)
             added = cleared & ~approach_is_clear(surface, grasps[:, :3], grasps[:, 3:7])
             added &= (grasps[:, 8] >= low) & (grasps[:, 8] < high)

@@ -383,7 +383,11 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
                         "to the default request? (Runs that newer results replace in the README's table.)"),
     ("beyond-the-sides-", "What does taking observed surface that meets one of the workspace cube's side faces to go "
                           "on past it, in the clearance check, do to the default request and to the antipodal "
-                          "baseline?"),
+                          "baseline? (Runs that newer results replace in the README's table.)"),
+    ("table-reach-", "What does forgiving the table's contact in the last centimetre of the hand's own approach "
+                     "(the clearance check's grown hand meets the table its margin sooner, and the support plane's "
+                     "points stand for a table up to their band lower) do to the default request and to the "
+                     "antipodal baseline?"),
     ("seed-", "Do other seeds (other draws of scenes, the same command; the seed opens the folder's name) "
               "agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "

@@ -33,7 +33,8 @@ ALTERNATIVES = (
 )  # fmt: skip
 #: How far short of the grasp pose (m) the fingertips may meet the support plane, and how close to
 #: it (in voxels) a surface point counts as the plane's: the TSDF places a table within a fraction
-#: of a voxel.
+#: of a voxel. The distance is the hand's own: the check grows the hand by its margin, whose
+#: fingertips meet the plane that much sooner (:func:`contact_tolerances`).
 SUPPORT_CONTACT_TOLERANCE = 0.01
 SUPPORT_BAND_VOXELS = 0.25
 #: At most this many dropped grasps (the best ranked) are tried again: each costs
@@ -213,7 +214,7 @@ def observed_for_checks(
         beyond = continued_past_sides(surface, to_workspace, workspace_size, spacing or voxel_size, floor)
         surface = np.vstack([surface, beyond]) if len(beyond) else surface
     if surface is not None and support is not None:
-        tolerance = contact_tolerances(surface, to_workspace, support, voxel_size)
+        tolerance = contact_tolerances(surface, to_workspace, support, voxel_size, clearance.margin)
     return ObservedScene(
         surface, tolerance, grid, voxel_size, to_workspace, workspace_size, support, clearance
     )
@@ -259,13 +260,19 @@ def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: Observ
 
 
 def contact_tolerances(
-    surface: np.ndarray, to_workspace: np.ndarray, support: float, voxel_size: float
+    surface: np.ndarray, to_workspace: np.ndarray, support: float, voxel_size: float, margin: float
 ) -> np.ndarray:
     """(M,) the clearance check's contact tolerance (m) for each surface point (world frame):
-    :data:`SUPPORT_CONTACT_TOLERANCE` on the support plane (``support``, workspace z), the usual elsewhere."""
+    on the support plane (``support``, workspace z), :data:`SUPPORT_CONTACT_TOLERANCE` for the hand
+    as built, so plus the ``margin`` the check grows it by (a guarded approach stops when the real
+    fingertips, not the grown ones, meet the table) and the band the plane's points lie in (they
+    stand for a table up to that much lower). The usual tolerance elsewhere."""
     height = surface @ to_workspace[2, :3] + to_workspace[2, 3]  # workspace z: up
-    on_support = np.abs(height - support) < SUPPORT_BAND_VOXELS * voxel_size
-    return np.where(on_support, SUPPORT_CONTACT_TOLERANCE, ClearanceConfig().contact_tolerance)
+    band = SUPPORT_BAND_VOXELS * voxel_size
+    on_support = np.abs(height - support) < band
+    return np.where(
+        on_support, SUPPORT_CONTACT_TOLERANCE + margin + band, ClearanceConfig().contact_tolerance
+    )
 
 
 def _grip_measure(positions: np.ndarray, orientations: Rotation, seen: ObservedScene) -> GripMeasure:

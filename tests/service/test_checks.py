@@ -11,7 +11,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from service.baseline import AntipodalConfig, grips_antipodally, plan_antipodal
-from service.checks import SUPPORT_CONTACT_TOLERANCE, Checked, check_grasps, clear_of, contact_tolerances
+from service.checks import (
+    SUPPORT_BAND_VOXELS,
+    SUPPORT_CONTACT_TOLERANCE,
+    Checked,
+    check_grasps,
+    clear_of,
+    contact_tolerances,
+)
 from service.clearance import (
     FALLBACK_MARGIN,
     NETWORK_FINE_MIN_POINTS,
@@ -372,7 +379,9 @@ def test_an_object_sticking_out_of_the_cube_is_taken_to_go_on_past_its_side():
     observed = check_grasps([leaning], surface, None, VOXEL, np.eye(4), SIZE, STRICT, False, past_sides=False)
     assert observed.grasps == [leaning]
     # What the cube shows of that object does not meet the hand: what goes on past the side does.
-    tolerance = contact_tolerances(surface, np.eye(4), support_height(grid, VOXEL), VOXEL)
+    tolerance = contact_tolerances(
+        surface, np.eye(4), support_height(grid, VOXEL), VOXEL, ClearanceConfig().margin
+    )
     assert approach_is_clear(surface, [leaning.position], [leaning.orientation], point_tolerance=tolerance)[0]
     alone = grid_of(lambda p: np.minimum(table(p), post(p)))
     kept = check_grasps(
@@ -397,14 +406,19 @@ def test_without_the_grip_check_no_other_pose_is_tried():
 
 def test_the_fingertips_may_meet_the_table_in_the_last_centimetre_of_the_approach():
     """Around a flat object a guarded approach stops when the fingertips touch the table: the
-    support plane's points are forgiven in the last centimetre, an object's are not."""
+    support plane's points are forgiven in the last centimetre of the hand's own approach (the grown
+    hand's, longer by the check's margin), an object's are not."""
     table = box((0.0, 0.0, 0.0), (SIZE, SIZE, TABLE_Z))
     tile = box((0.13, 0.1275, TABLE_Z), (0.17, 0.1725, TABLE_Z + 0.015))
     grid = grid_of(lambda p: np.minimum(table(p), tile(p)))
     surface = grid_surface_points(grid, VOXEL)
     support = support_height(grid, VOXEL)
-    tolerance = contact_tolerances(surface, np.eye(4), support, VOXEL)
-    assert set(np.unique(tolerance)) == {ClearanceConfig().contact_tolerance, SUPPORT_CONTACT_TOLERANCE}
+    margin = ClearanceConfig().margin
+    tolerance = contact_tolerances(surface, np.eye(4), support, VOXEL, margin)
+    band = SUPPORT_BAND_VOXELS * VOXEL  # the plane's points stand for a table up to this much lower
+    assert np.allclose(
+        np.unique(tolerance), [ClearanceConfig().contact_tolerance, SUPPORT_CONTACT_TOLERANCE + margin + band]
+    )
 
     def clear(
         depth: float, points=surface, tolerances=tolerance
@@ -413,12 +427,12 @@ def test_the_fingertips_may_meet_the_table_in_the_last_centimetre_of_the_approac
         args = ([grasp.position], [grasp.orientation])
         return bool(approach_is_clear(points, *args, point_tolerance=tolerances)[0])
 
-    within = SUPPORT_CONTACT_TOLERANCE - ClearanceConfig().margin - 0.001  # the grown fingertips, 1 mm short
+    within = SUPPORT_CONTACT_TOLERANCE - 0.001  # the fingertips 1 mm short of the tolerance
     assert not clear(within, tolerances=None)  # the usual 5 mm: dropped
     assert clear(within)  # on the table within the last centimetre: kept
-    assert not clear(0.015)  # deeper than the tolerance: dropped
+    assert not clear(SUPPORT_CONTACT_TOLERANCE + band + 0.002)  # deeper than the tolerance: dropped
     raised = surface + [0.0, 0.0, 0.02]  # the same points 2 cm up are an object's, not the table's
-    assert not clear(within - 0.02, raised, contact_tolerances(raised, np.eye(4), support, VOXEL))
+    assert not clear(within - 0.02, raised, contact_tolerances(raised, np.eye(4), support, VOXEL, margin))
     with pytest.raises(ValueError, match="contact tolerances"):
         clear(within, tolerances=tolerance[:-1])
 
