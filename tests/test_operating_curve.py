@@ -40,7 +40,7 @@ def test_curves_group_by_model_request_and_scenario_and_keep_the_newest(tmp_path
 
     page = report.curves_page(tmp_path)
     assert f"#### `{ROW['model']}`, `vgn`, pile-5" in page
-    assert "| 0.8 | 61.6 (56.6-66.6) | 49.3 (45.3-53.3) | 386 | 72 / 7 / 90 / 0 | `t08/bench-a` |" in page
+    assert "| 0.8 | 61.6 (56.6-66.6) | 49.3 (45.3-53.3) | 386 | 72 / 7 / 90 / 0 | `t08` |" in page
     assert "2031-02-03, Example CPU 9000 (2 cores)" in page
     assert "two thresholds" in report.curves_page(tmp_path / "t08")
 
