@@ -111,7 +111,7 @@ def run_round(
         checked = vgn.grasps(session, threshold=candidates, turn_average=True, clearance=True, grip=False,
                              max_grasps=500).grasps  # fmt: skip
         look = {"grasps": candidate_rows(every, {_key(g) for g in checked}),
-                "outcomes": _executed(episode, every), "grid": vgn.tsdf(session), "cloud": vgn.cloud(session)}  # fmt: skip
+                **_executed(episode, every), "grid": vgn.tsdf(session), "cloud": vgn.cloud(session)}  # fmt: skip
         surface: list[Grasp] = []
         if pairs:
             # The pairs the service falls back on, down to its fallback floor; the report replays
@@ -123,8 +123,9 @@ def run_round(
                     len(surface), pairs, replace=False
                 )
                 surface = [surface[i] for i in np.sort(drawn)]
+            executed = _executed(episode, surface)
             look |= {"pairs": candidate_rows(surface, {_key(g) for g in surface}),
-                     "pair_outcomes": _executed(episode, surface)}  # fmt: skip
+                     "pair_outcomes": executed["outcomes"], "pair_closed_on": executed["closed_on"]}  # fmt: skip
         looks.append(look)
         default = [g for g in checked if g.quality >= DEFAULT_THRESHOLD] or surface
         if not default:
@@ -136,17 +137,19 @@ def run_round(
     return looks
 
 
-def _executed(episode: ClutterRemoval, grasps: list[Grasp]) -> np.ndarray:
-    """Each grasp's outcome (its index in ``OUTCOMES``), every one executed from the current state."""
+def _executed(episode: ClutterRemoval, grasps: list[Grasp]) -> dict[str, np.ndarray]:
+    """Each grasp's ``outcomes`` (its index in ``OUTCOMES``) and how many objects the closing hand
+    touched (``closed_on``: two is a grasp across neighbours), every one executed from the current state."""
     world = episode.world
     state = world.save_state()
-    outcomes = []
+    outcomes, closed_on = [], []
     for grasp in grasps:
         trial = execute_grasp(world, episode.gripper, grasp.as_matrix(), remove_grasped=False)
         outcomes.append(OUTCOMES.index(trial.outcome))
+        closed_on.append(len(trial.closed_on))
         world.restore_state(state)
     world.discard_state(state)
-    return np.array(outcomes, np.int8)
+    return {"outcomes": np.array(outcomes, np.int8), "closed_on": np.array(closed_on, np.int8)}
 
 
 def _npz_bytes(looks: list[dict[str, np.ndarray]]) -> bytes:
@@ -156,12 +159,16 @@ def _npz_bytes(looks: list[dict[str, np.ndarray]]) -> bytes:
     return buffer.getvalue()
 
 
+#: What a stored look may hold (rounds collected before ``closed_on`` was recorded lack it).
+LOOK_ARRAYS = ("grasps", "outcomes", "closed_on", "grid", "cloud", "pairs", "pair_outcomes", "pair_closed_on")
+
+
 def load_looks(folder: Path) -> list[dict[str, np.ndarray]]:
     """Every stored look of ``folder``'s rounds."""
     looks = []
     for path in sorted(folder.glob("round*.npz")):
         with np.load(path) as data:
-            looks += [{name: data[f"{name}{i}"] for name in ("grasps", "outcomes", "grid", "cloud", "pairs", "pair_outcomes")
+            looks += [{name: data[f"{name}{i}"] for name in LOOK_ARRAYS
                        if f"{name}{i}" in data} for i in range(int(data["looks"]))]  # fmt: skip
     return looks
 

@@ -33,8 +33,14 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
         assert set(np.unique(grasps[:, 9])) <= {0.0, 1.0}
         assert np.all((outcomes >= 0) & (outcomes < len(Outcome)))
         assert Outcome.INTERRUPTED not in {list(Outcome)[o] for o in outcomes}
+        # How many of the three blocks the closing hand touched; a success held at least one.
+        assert look["closed_on"].shape == outcomes.shape and np.all(
+            (look["closed_on"] >= 0) & (look["closed_on"] <= 3)
+        )
+        assert np.all(look["closed_on"][outcomes == list(Outcome).index(Outcome.SUCCESS)] >= 1)
         pairs = look["pairs"]  # the surface's clearance-checked pairs, four at most, each executed
         assert pairs.shape == (len(look["pair_outcomes"]), 10) and len(pairs) <= 4
+        assert look["pair_closed_on"].shape == look["pair_outcomes"].shape
         assert np.all(pairs[:, 8] >= 0.5) and np.all(pairs[:, 9] == 1.0)
     assert any(len(look["outcomes"]) for look in looks)
     capsys.readouterr()
