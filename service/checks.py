@@ -17,7 +17,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from service.clearance import ClearanceConfig, approach_is_clear, continued_past_sides, fingers_inside
+from service.clearance import (
+    ClearanceConfig,
+    above_table_outside,
+    approach_is_clear,
+    continued_past_sides,
+    fingers_inside,
+)
 from service.grip import GripConfig, GripMeasure, measure_grip, support_height
 from service.hands import active_hand
 from vgn_contract.schemas import Grasp
@@ -251,12 +257,21 @@ def _clear(positions: np.ndarray, orientations: Rotation, seen: ObservedScene) -
 
 
 def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: ObservedScene) -> np.ndarray:
-    """(G,) bool: the open hand's approach misses the surface. The support plane's points may meet the
-    hand in the last :data:`SUPPORT_CONTACT_TOLERANCE` of the approach: fingertips on the table stop a
-    guarded approach there, around a flat object."""
-    return approach_is_clear(
+    """(G,) bool: the open hand's approach misses the surface, and the table where it goes on past the
+    cube's sides. The support plane may meet the hand in the last :data:`SUPPORT_CONTACT_TOLERANCE`
+    of the approach (:func:`contact_tolerances`): fingertips on the table stop a guarded approach
+    there, around a flat object."""
+    clear = approach_is_clear(
         seen.surface, positions, quaternions, seen.clearance, point_tolerance=seen.tolerance
     )
+    if seen.support is not None:
+        # The plane's points stand for a table up to a band lower, met as late as they may be.
+        lowest = seen.support - SUPPORT_BAND_VOXELS * seen.voxel_size
+        last = support_tolerance(seen.voxel_size, seen.clearance.margin)
+        clear &= above_table_outside(
+            positions, quaternions, seen.to_workspace, seen.workspace_size, lowest, seen.clearance, first=last
+        )
+    return clear
 
 
 def contact_tolerances(
@@ -268,11 +283,13 @@ def contact_tolerances(
     fingertips, not the grown ones, meet the table) and the band the plane's points lie in (they
     stand for a table up to that much lower). The usual tolerance elsewhere."""
     height = surface @ to_workspace[2, :3] + to_workspace[2, 3]  # workspace z: up
-    band = SUPPORT_BAND_VOXELS * voxel_size
-    on_support = np.abs(height - support) < band
-    return np.where(
-        on_support, SUPPORT_CONTACT_TOLERANCE + margin + band, ClearanceConfig().contact_tolerance
-    )
+    on_support = np.abs(height - support) < SUPPORT_BAND_VOXELS * voxel_size
+    return np.where(on_support, support_tolerance(voxel_size, margin), ClearanceConfig().contact_tolerance)
+
+
+def support_tolerance(voxel_size: float, margin: float) -> float:
+    """How far short of the grasp pose (m) the hand grown by ``margin`` may meet the support plane."""
+    return SUPPORT_CONTACT_TOLERANCE + margin + SUPPORT_BAND_VOXELS * voxel_size
 
 
 def _grip_measure(positions: np.ndarray, orientations: Rotation, seen: ObservedScene) -> GripMeasure:

@@ -189,6 +189,50 @@ def _segment_hits_box(
     return np.maximum(enter.max(axis=-1), first_u) <= np.minimum(leave.min(axis=-1), last_u)
 
 
+def above_table_outside(
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    to_workspace: np.ndarray,
+    size: float,
+    table: float,
+    config: ClearanceConfig = ClearanceConfig(),  # noqa: B008 (frozen: one shared default is safe)
+    hand: GripperDescription | None = None,
+    first: float = 0.0,
+) -> np.ndarray:
+    """(G,) bool: the open ``hand`` (grown by ``config.margin``), swept in from the pre-grasp to
+    ``first`` m short of the grasp pose, stays above the table (workspace height ``table``) outside
+    the workspace cube's footprint (side ``size``, ``to_workspace`` taking the grasps' frame to the
+    cube's). The volume shows the table only inside the cube, but a table is a plane: a hand coming
+    in low from beside the cube meets it there all the same.
+
+    The swept hand is the convex hull of each box's corners at the two ends of the sweep; its part
+    below the table is spanned by the corners below it and the points where the segments between
+    corners cross it, so the hull dips into the table outside the cube exactly when one of those does."""
+    hand = hand or active_hand()
+    opening, pregrasp_distance = config.approach(hand)
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if not len(positions):
+        return np.ones(0, dtype=bool)
+    corners = _box_corners(*hand_boxes(opening, config.margin, hand))  # (B, 8, 3) grasp frame
+    back = np.array([0.0, 0.0, 1.0])
+    swept = np.concatenate([corners - first * back, corners - pregrasp_distance * back], axis=1)  # (B, 16, 3)
+    rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
+    world = positions[:, None, None, :] + np.einsum("gij,bkj->gbki", rotations, swept)
+    local = world @ to_workspace[:3, :3].T + to_workspace[:3, 3]  # (G, B, 16, 3)
+    depth = local[..., 2] - table
+    ends, starts = np.triu_indices(swept.shape[1], 1)
+    near, far = depth[..., ends], depth[..., starts]
+    crosses = (near < 0.0) != (far < 0.0)
+    share = near / np.where(crosses, near - far, 1.0)
+    crossing = local[..., ends, :] + share[..., None] * (local[..., starts, :] - local[..., ends, :])
+
+    def outside(points: np.ndarray) -> np.ndarray:
+        return np.any((points[..., :2] < 0.0) | (points[..., :2] > size), axis=-1)
+
+    under = (depth < 0.0) & outside(local)
+    return ~(under.any(axis=(1, 2)) | (crosses & outside(crossing)).any(axis=(1, 2)))
+
+
 def fingers_inside(
     positions: np.ndarray,
     orientations: np.ndarray,

@@ -25,6 +25,7 @@ from service.clearance import (
     ClearanceConfig,
     approach_is_clear,
     clear_grasps,
+    fingers_inside,
 )
 from service.core import PlanningService
 from service.grid_surface import grid_surface_points
@@ -388,6 +389,25 @@ def test_an_object_sticking_out_of_the_cube_is_taken_to_go_on_past_its_side():
         [leaning], grid_surface_points(alone, VOXEL), None, VOXEL, np.eye(4), SIZE, STRICT, False
     )
     assert kept.grasps == [leaning]
+
+
+def test_a_hand_coming_in_low_from_beside_the_cube_meets_the_table_there():
+    """The volume shows the table only inside the cube, but it goes on past the sides. A block at the
+    cube's edge grasped from outside, closing across it with the palm upright: low, the palm sweeps
+    under the table's height outside the cube and is dropped; 2 cm higher it is kept. Neither meets
+    what the volume shows."""
+    table = box((0.0, 0.0, 0.0), (SIZE, SIZE, TABLE_Z))
+    block = box((0.135, 0.02, TABLE_Z), (0.165, 0.05, TABLE_Z + 0.06))
+    grid = grid_of(lambda p: np.minimum(table(p), block(p)))
+    surface = grid_surface_points(grid, VOXEL)
+    # Approach along +y from outside the cube, closing along x; the palm's 6 cm stand upright.
+    sideways = Rotation.from_matrix([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    low, high = (grasp_at((0.15, 0.035, TABLE_Z + height), sideways) for height in (0.025, 0.045))
+    assert clear_of([low, high], surface, grid, VOXEL, np.eye(4), SIZE) == [high]
+    grasps = [low, high]
+    positions, orientations = [g.position for g in grasps], [g.orientation for g in grasps]
+    assert approach_is_clear(surface, positions, orientations).all()  # the observed surface: both clear
+    assert fingers_inside(np.array(positions), np.array(orientations), np.eye(4), SIZE).all()
 
 
 def test_without_the_grip_check_no_other_pose_is_tried():

@@ -18,6 +18,7 @@ from service.clearance import (
     EDGE_BAND_SPACINGS,
     EDGE_REACH,
     ClearanceConfig,
+    above_table_outside,
     approach_is_clear,
     clear_grasps,
     continued_past_sides,
@@ -169,6 +170,45 @@ def test_surface_that_meets_a_side_of_the_cube_is_carried_on_straight_out_of_it(
     everything = continued_past_sides(world, np.linalg.inv(pose), size, spacing, None)
     assert len(everything) == 2 * steps  # without a floor the table's point goes on too
     assert continued_past_sides(np.zeros((0, 3)), np.eye(4), size, spacing, floor).shape == (0, 3)
+
+
+def test_the_table_past_the_cube_is_met_where_the_swept_hand_dips_under_it_outside_the_footprint():
+    """Against the hand's boxes placed every 0.5 mm along the approach, each sampled on a 9^3 lattice
+    that includes its corners: a grasp is refused exactly when some sample lies under the table and
+    outside the cube's footprint, but for samples within the lattice's spacing of the plane."""
+    size, table, last = 0.3, 0.05, 0.01
+    rng = np.random.default_rng(11)  # a draw where the segments' crossings decide some verdicts
+    count = 80
+    positions = np.column_stack(
+        [rng.uniform(-0.06, 0.06, count), rng.uniform(0.0, size, count), table + rng.uniform(0.0, 0.1, count)]
+    )
+    orientations = Rotation.random(count, random_state=12)
+    verdicts = above_table_outside(
+        positions, orientations.as_quat(), np.eye(4), size, table, EXACT, first=last
+    )
+    lattice = np.stack(np.meshgrid(*[np.linspace(-1.0, 1.0, 9)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    centres, rotations, halves = hand_boxes()
+    matrices = orientations.as_matrix()
+    depths = np.full(count, np.inf)  # how far the deepest sample outside the footprint goes under the table
+    for offset in np.arange(last, PREGRASP_DISTANCE + 1e-9, 0.0005):
+        for centre, rotation, half in zip(centres, rotations, halves, strict=True):
+            local = centre + (lattice * half) @ rotation.T - [0.0, 0.0, offset]  # grasp frame
+            world = positions[:, None, :] + np.einsum("gij,kj->gki", matrices, local)
+            outside = np.any((world[..., :2] < 0.0) | (world[..., :2] > size), axis=-1)
+            heights = np.where(outside, world[..., 2] - table, np.inf)
+            depths = np.minimum(depths, heights.min(axis=1))
+    decided = np.abs(depths) > 0.003  # farther from the plane than the lattice's spacing
+    assert np.array_equal(verdicts[decided], depths[decided] > 0.0)
+    assert 10 < verdicts.sum() < count - 10 and decided.sum() > 0.8 * count
+    # Inside the footprint the table is the observed surface's business, not this check's: a hand from
+    # above sunk 5 cm into it passes in the middle of the cube, and not 1 cm from its side.
+    from_above = Rotation.from_euler("x", 180, degrees=True).as_quat()
+    sunk = np.array([[0.15, 0.15, table - 0.05], [0.01, 0.15, table - 0.05]])
+    assert above_table_outside(sunk, [from_above] * 2, np.eye(4), size, table, EXACT).tolist() == [
+        True,
+        False,
+    ]
+    assert above_table_outside(np.zeros((0, 3)), np.zeros((0, 4)), np.eye(4), size, table).shape == (0,)
 
 
 def test_no_geometry_or_no_grasps():
