@@ -476,17 +476,6 @@ def newest_date(run: tuple[Path, list[dict[str, Any]]]) -> str:
     return max((measured_at(row_measured(row, folder)) for row in rows), default="")
 
 
-def is_noisy(folder: Path, row: dict[str, Any]) -> bool:
-    """Whether a row ran with depth noise: its table's settings line says so (one benchmark command
-    has one ``--noise``), or, without a table.md, the config.json of its run's folder."""
-    settings = clutter_settings(folder)
-    if settings:
-        return "noise" in settings
-    base = row["planner"].split("+")[0]
-    configs = folder.glob(f"{base}-{row.get('selection', 'random')}-{row['scenario']}*/config.json")
-    return any(json.loads(path.read_text()).get("noise") for path in configs)
-
-
 #: What a run's settings line says about how the scene was seen, and how tables name it.
 CONDITIONS = [("objects pybullet_data", "cross-source objects"), ("side view", "one side view"), ("random view", "one random view"), ("depth noise", "depth noise"), ("dex sensor", "depth noise"),
               ("structured-light sensor", "structured-light sensor"), ("camera pose error", "camera pose error"),
@@ -498,7 +487,7 @@ def scenario_label(folder: Path, row: dict[str, Any]) -> str:
     ``pile-5, structured-light sensor``: runs under different sensors never share a cell."""
     settings = clutter_settings(folder)
     if not settings:
-        return row["scenario"] + (", depth noise" if is_noisy(folder, row) else "")
+        return row["scenario"]
     found = []
     for text, label in CONDITIONS:
         if text in settings and label not in found:

@@ -189,6 +189,17 @@ def _segment_hits_box(
     return np.maximum(enter.max(axis=-1), first_u) <= np.minimum(leave.min(axis=-1), last_u)
 
 
+def _swept_box_edges() -> tuple[np.ndarray, np.ndarray]:
+    """The edges of a box swept along a segment, as pairs of indices into its 16 corners (the 8 of
+    :func:`_box_corners` at the start, then at the end): each end's 12, and the 8 corners' paths."""
+    box = [(k, k | bit) for k in range(8) for bit in (1, 2, 4) if not k & bit]
+    pairs = box + [(a + 8, b + 8) for a, b in box] + [(k, k + 8) for k in range(8)]
+    return np.array([a for a, _ in pairs]), np.array([b for _, b in pairs])
+
+
+_SWEPT_EDGES = _swept_box_edges()
+
+
 def above_table_outside(
     positions: np.ndarray,
     orientations: np.ndarray,
@@ -205,9 +216,10 @@ def above_table_outside(
     cube's). The volume shows the table only inside the cube, but a table is a plane: a hand coming
     in low from beside the cube meets it there all the same.
 
-    The swept hand is the convex hull of each box's corners at the two ends of the sweep; its part
-    below the table is spanned by the corners below it and the points where the segments between
-    corners cross it, so the hull dips into the table outside the cube exactly when one of those does."""
+    Each swept box is the convex hull of the box at the two ends of the sweep; its part below the
+    table is spanned by its corners below it and the points where its edges (the box's at either end,
+    and each corner's path) cross it, so it dips into the table outside the cube exactly when one of
+    those does."""
     hand = hand or active_hand()
     opening, pregrasp_distance = config.approach(hand)
     positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
@@ -220,11 +232,11 @@ def above_table_outside(
     world = positions[:, None, None, :] + np.einsum("gij,bkj->gbki", rotations, swept)
     local = world @ to_workspace[:3, :3].T + to_workspace[:3, 3]  # (G, B, 16, 3)
     depth = local[..., 2] - table
-    ends, starts = np.triu_indices(swept.shape[1], 1)
-    near, far = depth[..., ends], depth[..., starts]
+    one, other = _SWEPT_EDGES
+    near, far = depth[..., one], depth[..., other]
     crosses = (near < 0.0) != (far < 0.0)
     share = near / np.where(crosses, near - far, 1.0)
-    crossing = local[..., ends, :] + share[..., None] * (local[..., starts, :] - local[..., ends, :])
+    crossing = local[..., one, :] + share[..., None] * (local[..., other, :] - local[..., one, :])
 
     def outside(points: np.ndarray) -> np.ndarray:
         return np.any((points[..., :2] < 0.0) | (points[..., :2] > size), axis=-1)
