@@ -68,7 +68,8 @@ def _counts(counter: Counter[str]) -> str:
 
 
 def failures_table(rows: list[dict[str, str]]) -> str:
-    """A Markdown table of the objects with a failure, and a line on how the failures spread."""
+    """A Markdown table of the objects with a failure, and a line on how the failures spread and how
+    the attempts fared that closed on neighbours together (the hand squeezes them apart)."""
     entries = [entry for entry in by_object(rows) if entry.failures]
     failed = sum(entry.failures for entry in entries)
     if not failed:
@@ -83,9 +84,11 @@ def failures_table(rows: list[dict[str, str]]) -> str:
         ),
     ]
     worst = sum(entry.failures for entry in entries[:2])
+    together = [row for row in rows if "+" in row["closed_on"]]
     summary = (
         f"\n{failed} of {len(rows)} attempts failed, on {len(entries)} objects or groups; the two with the "
-        f"most failures hold {worst} of them.\n"
+        f"most failures hold {worst} of them. Closed on two objects or more: {len(together)} attempts, "
+        f"{sum(row['outcome'] != 'success' for row in together)} failed.\n"
     )
     return "\n".join(lines) + "\n" + summary
 

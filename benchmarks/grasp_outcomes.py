@@ -13,7 +13,8 @@ the fine cloud go to ``OUT/roundNNNN.npz`` (written atomically; a rerun resumes)
 ``report`` replays the grip check (``service.grip``) on the stored grids at several alignment
 thresholds and prints, among the grasps a request without it would return (quality >= 0.8 and
 clearance-checked), how many it keeps and drops and how often each group succeeded; then, for
-several preferred alignments, how often a random grasp of each look's answer succeeds; then, for
+several preferred alignments, how often a random grasp of each look's answer succeeds; how many
+objects the closing hand touched and how often each count succeeded; then, for
 several cones of the antipodal check (``--antipodal-angles``), the same for the grasps that pass both
 checks, judged by the faces their pads meet on the fine cloud. With ``collect --pairs N`` each look
 also executes up to N of the surface's antipodal pairs (the service's answer where the network's
@@ -218,6 +219,8 @@ def report(args: argparse.Namespace) -> int:
         per_look = [float(np.mean(pick)) for pick in picks]
         grasps = np.mean([len(pick) for pick in picks]) if picks else 0.0
         print(f"{preferred:19.2f} | {len(picks):5d} | {_percent(per_look):>18} | {grasps:15.1f}")
+    print()
+    closed_on_report(looks)
     print()
     support_report(looks, voxel_size)
     print()
@@ -664,6 +667,34 @@ def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -
     without = sum(not keep.any() for keep in keeps)
     print(f"{label} | {len(opposed):7d} | {_percent(opposed):>9} | {len(other):11d} | {_percent(other):>9} | "
           f"{_percent(per_look):>18} | {without}")  # fmt: skip
+
+
+def closed_on_report(looks: list[dict[str, np.ndarray]]) -> None:
+    """Print how many objects the closing hand touched, and how often each count succeeded: the
+    network's grasps a request without the grip check would return, and the surface's pairs. A hand
+    that closes on two neighbours squeezes them apart, so how common that is says whether a check for
+    it could pay off on these objects."""
+    stored = [look for look in looks if "closed_on" in look]
+    if not stored:
+        print("no closed-on counts stored (rounds collected before they were)")
+        return
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    print("grasps | objects the hand closed on | grasps | share % | success %")
+    for label, rows, outcomes, counts in (("network", "grasps", "outcomes", "closed_on"),
+                                          ("pairs", "pairs", "pair_outcomes", "pair_closed_on")):  # fmt: skip
+        held, touched = [], []
+        for look in stored:
+            if counts not in look:
+                continue
+            chosen = np.ones(len(look[rows]), dtype=bool)
+            if label == "network":
+                chosen = (look[rows][:, 8] >= DEFAULT_THRESHOLD) & (look[rows][:, 9] > 0)
+            held += list(look[outcomes][chosen] == success)
+            touched += list(np.minimum(look[counts][chosen], 2))
+        for count, name in ((0, "none"), (1, "one"), (2, "two or more")):
+            group = [h for h, t in zip(held, touched, strict=True) if t == count]
+            share = 100 * len(group) / max(len(held), 1)
+            print(f"{label:7s}| {name:26s} | {len(group):6d} | {share:7.1f} | {_percent(group):>9}")
 
 
 def support_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
