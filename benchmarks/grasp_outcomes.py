@@ -21,7 +21,8 @@ also executes up to N of the surface's antipodal pairs (the service's answer whe
 grasps fail the checks), and the report ends with how often a random grasp of each look's answer
 succeeds under each order of the antipodal check's answers (``TIER_ORDERS``), with how the network's
 grasps of each answer fare when cleared on the fine cloud too, with the clearance check's hand
-grown by each of several margins, and with the surface taken to go on past the cube's sides or not. Choose settings on *training* objects; benchmark on held-out ones.
+grown by each of several margins, and with the surface taken to go on past the cube's sides or not,
+and how many grasps the table taken to go on past them vetoes. Choose settings on *training* objects; benchmark on held-out ones.
 """
 
 from __future__ import annotations
@@ -36,8 +37,16 @@ from scipy.spatial.transform import Rotation
 
 from client.connect import connect
 from service.baseline import grips_antipodally
-from service.checks import SUPPORT_CONTACT_TOLERANCE, ObservedScene, contact_tolerances, observed_for_checks
-from service.clearance import NETWORK_FINE_MIN_POINTS, ClearanceConfig, approach_is_clear
+from service.checks import (
+    SUPPORT_BAND_VOXELS,
+    SUPPORT_CONTACT_TOLERANCE,
+    ObservedScene,
+    approach_is_clear_of,
+    contact_tolerances,
+    observed_for_checks,
+    support_tolerance,
+)
+from service.clearance import NETWORK_FINE_MIN_POINTS, ClearanceConfig, above_table_outside, approach_is_clear
 from service.grid_surface import grid_surface_cloud, grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
 from service.launch.embedded import EmbeddedService
@@ -235,6 +244,8 @@ def report(args: argparse.Namespace) -> int:
         margin_report(with_pairs, voxel_size, args.clearance_margins)
         print()
         sides_report(with_pairs, voxel_size)
+        print()
+        table_report(with_pairs, voxel_size)
     return 0
 
 
@@ -513,6 +524,38 @@ def sides_report(looks: list[dict[str, np.ndarray]], voxel_size: float, repeats:
         print(f"{label} | {len(answered)} | {_percent(answered)} | {against}")
 
 
+def table_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
+    """Print how many executed grasps the table taken to go on past the cube's sides vetoes, and how
+    those fared: the network's (quality >= the operating threshold) and the surface's pairs, each
+    clear of the observed surface, on looks where the support plane is found."""
+    success = OUTCOMES.index(Outcome.SUCCESS)
+    margin = ClearanceConfig().margin
+    print("grasps clear of the surface, by whether the table past the cube's sides vetoes them:")
+    print("grasps | clear | success % | vetoed | success %")
+    for label, rows, outcomes in (
+        ("network's grasps", "grasps", "outcomes"),
+        ("surface's pairs", "pairs", "pair_outcomes"),
+    ):
+        held, vetoed = [], []
+        for look in looks:
+            grid = look["grid"]
+            support = support_height(grid, voxel_size)
+            chosen = look[rows][:, 9] > 0
+            if label == "network's grasps":
+                chosen &= look[rows][:, 8] >= DEFAULT_THRESHOLD
+            if support is None or not chosen.any():
+                continue
+            grasps = look[rows][chosen]
+            above = above_table_outside(grasps[:, :3], grasps[:, 3:7], np.eye(4), voxel_size * grid.shape[0],
+                                        support - SUPPORT_BAND_VOXELS * voxel_size,
+                                        first=support_tolerance(voxel_size, margin))  # fmt: skip
+            held += list(look[outcomes][chosen] == success)
+            vetoed += list(~above)
+        held_arr, vetoed_arr = np.array(held, dtype=bool), np.array(vetoed, dtype=bool)
+        print(f"{label} | {len(held)} | {_percent(held)} | {int(vetoed_arr.sum())} | "
+              f"{_percent(list(held_arr[vetoed_arr]))}")  # fmt: skip
+
+
 def _vetoed_past_sides(
     look: dict[str, np.ndarray], voxel_size: float
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -652,9 +695,7 @@ def _cleared(rows: np.ndarray, seen: ObservedScene, clearance: ClearanceConfig) 
     what ``seen`` holds (the cube's frame)."""
     if seen.surface is None:
         return np.ones(len(rows), dtype=bool)
-    return approach_is_clear(
-        seen.surface, rows[:, :3], rows[:, 3:7], clearance, point_tolerance=seen.tolerance
-    )
+    return approach_is_clear_of(rows[:, :3], rows[:, 3:7], replace(seen, clearance=clearance))
 
 
 def _cone_row(label: str, keeps: list[np.ndarray], outcomes: list[np.ndarray]) -> None:

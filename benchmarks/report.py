@@ -387,7 +387,10 @@ EXPERIMENT_GROUPS: list[tuple[str, str]] = [
     ("table-reach-", "What does forgiving the table's contact in the last centimetre of the hand's own approach "
                      "(the clearance check's grown hand meets the table its margin sooner, and the support plane's "
                      "points stand for a table up to their band lower) do to the default request and to the "
-                     "antipodal baseline?"),
+                     "antipodal baseline? (Runs that newer results replace in the README's table.)"),
+    ("table-past-sides-", "What does taking the table to go on past the workspace cube's sides (the clearance "
+                          "check's swept hand kept above the support plane outside the cube until the approach's "
+                          "last centimetre) do to the default request and to the antipodal baseline?"),
     ("seed-", "Do other seeds (other draws of scenes, the same command; the seed opens the folder's name) "
               "agree with seed 1?"),
     ("surface-first-", "What does answering with the surface's antipodal pairs before the network's lower threshold "

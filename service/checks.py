@@ -174,7 +174,7 @@ def clear_of(
     seen = observed_for_checks(np.asarray(points, dtype=np.float64).reshape(-1, 3), grid, voxel_size, workspace_pose,
                                workspace_size, clearance, spacing, past_sides)  # fmt: skip
     positions = np.array([g.position for g in grasps], dtype=np.float64)
-    clear = _approach_clear(positions, np.array([g.orientation for g in grasps], dtype=np.float64), seen)
+    clear = approach_is_clear_of(positions, np.array([g.orientation for g in grasps], dtype=np.float64), seen)
     return [g for g, ok in zip(grasps, clear, strict=True) if ok]
 
 
@@ -244,7 +244,7 @@ def _stages(
     if seen.surface is not None:
         quaternions = orientations.as_quat()
         inside = fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
-        approach_clear = _approach_clear(positions, quaternions, seen)
+        approach_clear = approach_is_clear_of(positions, quaternions, seen)
     measure = None if seen.grid is None else _grip_measure(positions, orientations, seen)
     return inside, approach_clear, measure
 
@@ -253,10 +253,10 @@ def _clear(positions: np.ndarray, orientations: Rotation, seen: ObservedScene) -
     """(G,) bool: the open hand's approach misses the surface and its fingers stay in the cube."""
     quaternions = orientations.as_quat()
     inside = fingers_inside(positions, quaternions, seen.to_workspace, seen.workspace_size)
-    return inside & _approach_clear(positions, quaternions, seen)
+    return inside & approach_is_clear_of(positions, quaternions, seen)
 
 
-def _approach_clear(positions: np.ndarray, quaternions: np.ndarray, seen: ObservedScene) -> np.ndarray:
+def approach_is_clear_of(positions: np.ndarray, quaternions: np.ndarray, seen: ObservedScene) -> np.ndarray:
     """(G,) bool: the open hand's approach misses the surface, and the table where it goes on past the
     cube's sides. The support plane may meet the hand in the last :data:`SUPPORT_CONTACT_TOLERANCE`
     of the approach (:func:`contact_tolerances`): fingertips on the table stop a guarded approach

@@ -54,6 +54,7 @@ def test_a_round_is_collected_resumed_and_reported(tmp_path: Path, capsys):
     assert f"{2 * len(looks)} looks" in report and "min alignment | kept" in report  # the folder twice
     assert "as the grid shows them" in report and "by their horizontal normal" in report
     assert "objects the hand closed on" in report
+    assert "whether the table past the cube's sides vetoes them" in report
     thresholds, preferences = report.split("preferred alignment |")
     # Each threshold splits the same grasps into kept and dropped ones.
     lines = [line.split("|") for line in thresholds.splitlines() if line.strip().startswith(("0.00", "0.50"))]
