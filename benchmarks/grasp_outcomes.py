@@ -38,15 +38,14 @@ from scipy.spatial.transform import Rotation
 from client.connect import connect
 from service.baseline import grips_antipodally
 from service.checks import (
-    SUPPORT_BAND_VOXELS,
     SUPPORT_CONTACT_TOLERANCE,
     ObservedScene,
+    above_table_past_sides,
     approach_is_clear_of,
     contact_tolerances,
     observed_for_checks,
-    support_tolerance,
 )
-from service.clearance import NETWORK_FINE_MIN_POINTS, ClearanceConfig, above_table_outside, approach_is_clear
+from service.clearance import NETWORK_FINE_MIN_POINTS, ClearanceConfig, approach_is_clear
 from service.grid_surface import grid_surface_cloud, grid_surface_points
 from service.grip import GripConfig, measure_grip, support_height
 from service.launch.embedded import EmbeddedService
@@ -529,7 +528,6 @@ def table_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
     those fared: the network's (quality >= the operating threshold) and the surface's pairs, each
     clear of the observed surface, on looks where the support plane is found."""
     success = OUTCOMES.index(Outcome.SUCCESS)
-    margin = ClearanceConfig().margin
     print("grasps clear of the surface, by whether the table past the cube's sides vetoes them:")
     print("grasps | clear | success % | vetoed | success %")
     for label, rows, outcomes in (
@@ -539,16 +537,14 @@ def table_report(looks: list[dict[str, np.ndarray]], voxel_size: float) -> None:
         held, vetoed = [], []
         for look in looks:
             grid = look["grid"]
-            support = support_height(grid, voxel_size)
+            seen = observed_for_checks(None, grid, voxel_size, np.eye(4), voxel_size * grid.shape[0])
             chosen = look[rows][:, 9] > 0
             if label == "network's grasps":
                 chosen &= look[rows][:, 8] >= DEFAULT_THRESHOLD
-            if support is None or not chosen.any():
+            if seen.support is None or not chosen.any():
                 continue
             grasps = look[rows][chosen]
-            above = above_table_outside(grasps[:, :3], grasps[:, 3:7], np.eye(4), voxel_size * grid.shape[0],
-                                        support - SUPPORT_BAND_VOXELS * voxel_size,
-                                        first=support_tolerance(voxel_size, margin))  # fmt: skip
+            above = above_table_past_sides(grasps[:, :3], grasps[:, 3:7], seen)
             held += list(look[outcomes][chosen] == success)
             vetoed += list(~above)
         held_arr, vetoed_arr = np.array(held, dtype=bool), np.array(vetoed, dtype=bool)

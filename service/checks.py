@@ -264,14 +264,20 @@ def approach_is_clear_of(positions: np.ndarray, quaternions: np.ndarray, seen: O
     clear = approach_is_clear(
         seen.surface, positions, quaternions, seen.clearance, point_tolerance=seen.tolerance
     )
-    if seen.support is not None:
-        # The plane's points stand for a table up to a band lower, met as late as they may be.
-        lowest = seen.support - SUPPORT_BAND_VOXELS * seen.voxel_size
-        last = support_tolerance(seen.voxel_size, seen.clearance.margin)
-        clear &= above_table_outside(
-            positions, quaternions, seen.to_workspace, seen.workspace_size, lowest, seen.clearance, first=last
-        )
-    return clear
+    return clear & above_table_past_sides(positions, quaternions, seen)
+
+
+def above_table_past_sides(positions: np.ndarray, quaternions: np.ndarray, seen: ObservedScene) -> np.ndarray:
+    """(G,) bool: the open hand stays above the support plane where it goes on past the cube's sides
+    (all True where no plane was found). The plane's points stand for a table up to their band lower,
+    and the hand may meet it as late in the approach as it may meet them."""
+    if seen.support is None:
+        return np.ones(len(positions), dtype=bool)
+    lowest = seen.support - SUPPORT_BAND_VOXELS * seen.voxel_size
+    last = support_tolerance(seen.voxel_size, seen.clearance.margin)
+    return above_table_outside(
+        positions, quaternions, seen.to_workspace, seen.workspace_size, lowest, seen.clearance, first=last
+    )
 
 
 def contact_tolerances(

@@ -228,9 +228,11 @@ def above_table_outside(
     corners = _box_corners(*hand_boxes(opening, config.margin, hand))  # (B, 8, 3) grasp frame
     back = np.array([0.0, 0.0, 1.0])
     swept = np.concatenate([corners - first * back, corners - pregrasp_distance * back], axis=1)  # (B, 16, 3)
+    # Grasp frame → the cube's frame in one step: its rotation applied to each grasp's.
     rotations = Rotation.from_quat(np.asarray(orientations, dtype=np.float64).reshape(-1, 4)).as_matrix()
-    world = positions[:, None, None, :] + np.einsum("gij,bkj->gbki", rotations, swept)
-    local = world @ to_workspace[:3, :3].T + to_workspace[:3, 3]  # (G, B, 16, 3)
+    rotations = np.einsum("ij,gjk->gik", to_workspace[:3, :3], rotations)
+    origins = positions @ to_workspace[:3, :3].T + to_workspace[:3, 3]
+    local = origins[:, None, None, :] + np.einsum("gij,bkj->gbki", rotations, swept)  # (G, B, 16, 3)
     depth = local[..., 2] - table
     one, other = _SWEPT_EDGES
     near, far = depth[..., one], depth[..., other]
