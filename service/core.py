@@ -298,8 +298,8 @@ class PlanningService:
             # faces (one frame shows one face of each object: no grip check then), on the grid's faces
             # first; the fine cloud is read only where those do not settle it.
             opposing = self.settings.antipodal_check and not baseline and grip
-            faces = session.volume.surface_cloud() if opposing else None
-            surface = session.volume.surface_points() if clearance else None
+            points, faces = session.volume.surface() if clearance or opposing else (None, None)
+            surface, faces = (points if clearance else None), (faces if opposing else None)
             voxel_size, workspace_pose = session.workspace.voxel_size, session.volume.workspace_pose
             workspace_size = session.workspace.size
             session_hand = session.hand

@@ -64,23 +64,30 @@ def depth_scale(
     origin = camera_in_volume[:3, 3, None] / voxel_size - 0.5  # voxel values sit at voxel centres
     distance, observed = tsdf[..., 0], (tsdf[..., 1] > 0).astype(np.float64)
 
-    def cost(scale: float, every: int = 1) -> float:
-        at = origin + scale * offsets[:, ::every]
+    def costs(scales: np.ndarray, every: int = 1) -> np.ndarray:
+        # Every factor's points in one interpolation call each: per call, scipy's set-up costs as
+        # much as interpolating a thousand points.
+        points = offsets[:, ::every]
+        at = (origin[:, None, :] + scales[None, :, None] * points[:, None, :]).reshape(3, -1)
         seen = map_coordinates(observed, at, order=1, mode="constant", cval=0.0) > 0.999
-        if seen.sum() * every < search.min_points:
-            return np.inf
         near = np.abs(map_coordinates(distance, at[:, seen], order=1, mode="nearest"))
-        return float(np.minimum(near, 1.0).sum() + (~seen).sum()) / len(seen)
+        seen = seen.reshape(len(scales), -1)
+        counts = seen.sum(axis=1)
+        result = np.full(len(scales), np.inf)
+        for index, part in enumerate(np.split(near, np.cumsum(counts)[:-1])):
+            if counts[index] * every >= search.min_points:
+                result[index] = float(np.minimum(part, 1.0).sum() + (~seen[index]).sum()) / seen.shape[1]
+        return result
 
     # The coarse steps only pick where to look closer: a third of the points tell them apart.
     coarse = np.linspace(1.0 - search.max_error, 1.0 + search.max_error, search.coarse_steps)
-    costs = [cost(s, every=3) for s in coarse]
-    if not np.isfinite(min(costs)):
+    coarse_costs = costs(coarse, every=3)
+    if not np.isfinite(coarse_costs.min()):
         return 1.0
     step = coarse[1] - coarse[0]
-    best = coarse[int(np.argmin(costs))]
+    best = coarse[int(np.argmin(coarse_costs))]
     fine = np.linspace(best - step, best + step, search.fine_steps)
-    scale = float(fine[int(np.argmin([cost(s) for s in fine]))])
+    scale = float(fine[int(np.argmin(costs(fine)))])
     return 1.0 if abs(scale - 1.0) < 1e-9 else scale  # linspace's 1 may be a rounding off
 
 

@@ -316,13 +316,19 @@ class SceneVolume:
     def surface_points(self) -> np.ndarray:
         """(M, 3) surface points of the coarse volume (the network's), *world* frame: the cheap
         observed geometry the clearance check tests hands against (``TSDFVolume.surface_points``)."""
-        points = self.coarse.surface_points()
-        return points @ self.workspace_pose[:3, :3].T + self.workspace_pose[:3, 3]
+        return self._to_world(self.coarse.surface_points())
 
     def surface_cloud(self) -> np.ndarray:
         """(M, 6) float32 points and unit normals (from the TSDF gradient) of the coarse volume's
         surface, *world* frame: the network's view of the faces, cheap enough for every request."""
         return self._in_world(*self.coarse.surface_cloud())
+
+    def surface(self) -> tuple[np.ndarray, np.ndarray]:
+        """``surface_points()`` and ``surface_cloud()`` from one read of the coarse volume: Open3D
+        extracts points and normals together, and a request with both the clearance and the
+        antipodal check would otherwise pay for that twice."""
+        points, normals = self.coarse.surface_cloud()
+        return self._to_world(points), self._in_world(points, normals)
 
     def cloud(self) -> np.ndarray:
         """(M, 6) float32 points and unit normals of the fused surface in the *world* frame."""
@@ -335,9 +341,11 @@ class SceneVolume:
             points, normals = self._fine.surface_cloud()
         return self._in_world(points, normals)
 
+    def _to_world(self, points: np.ndarray) -> np.ndarray:
+        return points @ self.workspace_pose[:3, :3].T + self.workspace_pose[:3, 3]
+
     def _in_world(self, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
-        rotation, translation = self.workspace_pose[:3, :3], self.workspace_pose[:3, 3]
-        return np.hstack([points @ rotation.T + translation, normals @ rotation.T]).astype(np.float32)
+        return np.hstack([self._to_world(points), normals @ self.workspace_pose[:3, :3].T]).astype(np.float32)
 
     def state(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The coarse volume's ``TSDFVolume.state()`` and the fine one's (None before any frame

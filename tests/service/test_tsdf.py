@@ -94,6 +94,18 @@ def test_rotated_workspace_cloud_is_in_world_frame():
     assert np.percentile(SCENE.distance_to_surface(cloud[:, :3].astype(np.float64)), 95) < 0.003
 
 
+def test_one_read_of_the_surface_gives_both_of_its_forms_in_the_world_frame():
+    """``surface()`` is what a checked request reads in place of ``surface_points()`` and
+    ``surface_cloud()``: the same arrays, bit for bit, in a turned and shifted workspace too."""
+    pose = matrix_from_pose([0.3, -0.1, 0.02], [0, 0, np.sin(np.pi / 8), np.cos(np.pi / 8)])
+    volume = fused(pose)
+    points, cloud = volume.surface()
+    assert len(points) > 500
+    np.testing.assert_array_equal(points, volume.surface_points())
+    np.testing.assert_array_equal(cloud, volume.surface_cloud())
+    assert np.percentile(SCENE.distance_to_surface(points), 95) < 0.004
+
+
 def test_reset_empties_the_volume():
     volume = fused(views=1)
     assert volume.grid().any()
