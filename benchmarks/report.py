@@ -74,12 +74,20 @@ FAILURES = [("approach_contact", "approach contact"), ("nothing_held", "nothing 
 
 
 # Where and when -------------------------------------------------------------------------------
-def cpu_model() -> str:
-    """The CPU's model name (``/proc/cpuinfo``), or what ``platform`` knows elsewhere."""
+def cpu_model(cpuinfo: Path = Path("/proc/cpuinfo")) -> str:
+    """The CPU's model name (``/proc/cpuinfo``) with its family and model numbers, or what
+    ``platform`` knows elsewhere. A virtual machine may report a bare name ("AMD EPYC") for
+    processors of different generations, which run the same code at different speeds; the
+    numbers tell them apart."""
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
+        fields: dict[str, str] = {}
+        for line in cpuinfo.read_text().splitlines():
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip().lower(), value.strip())
+        if fields.get("model name"):
+            numbers = [f"{name} {fields[key]}" for key, name in (("cpu family", "family"), ("model", "model"))
+                       if fields.get(key)]  # fmt: skip
+            return " ".join([fields["model name"], *numbers])
     except OSError:
         pass
     return platform.processor() or platform.machine() or "unknown CPU"
@@ -620,7 +628,7 @@ def latency_page(results: Path) -> str:
             "docs/results/NAME/latency.json`, then `python -m benchmarks.report --stamp docs/results/NAME` and "
             "`python -m benchmarks.report`.\n"
         )
-    parts = []
+    parts = [latency_against_machine(runs, results)]
     for path, report in runs:
         env = report.get("environment") or {}
         parts.append(f"#### `{relative(path.parent, results)}`\n")
@@ -644,6 +652,39 @@ def latency_page(results: Path) -> str:
             parts.append("\n".join(["| target | value | result |", "| --- | --- | --- |"]
                                    + [target_row(t) for t in targets]) + "\n")  # fmt: skip
     return "\n".join(parts)
+
+
+#: The rows of a latency report that :func:`latency_against_machine` sets side by side.
+NAIVE_FORWARD_ROW = "VGN forward, naive fp32 eager (inference_mode)"
+DEFAULT_GRASPS_ROW = "VGNClient.grasps (service default)"
+SECOND_SERVER_ROW = "VGNClient.grasps (second server)"
+
+
+def latency_against_machine(runs: list[tuple[Path, dict[str, Any]]], results: Path) -> str:
+    """Each run's default grasp request over HTTP beside the naive forward pass timed in the same
+    run, oldest first. A virtual machine that reports the same CPU and cores has not always run
+    at the same speed: the naive pass, pure arithmetic that no change of the service touches,
+    shows how fast the machine was, so that a run's latency is read against its own machine."""
+    lines = []
+    for path, report in sorted(runs, key=lambda run: (latency_measured(*run) or {}).get("date") or ""):
+        rows = {row["name"]: row["p50_ms"] for row in report.get("results") or []}
+        if NAIVE_FORWARD_ROW not in rows or DEFAULT_GRASPS_ROW not in rows:
+            continue
+        naive, grasps = rows[NAIVE_FORWARD_ROW], rows[DEFAULT_GRASPS_ROW]
+        second = f"{rows[SECOND_SERVER_ROW]:.1f}" if SECOND_SERVER_ROW in rows else "-"
+        date = (latency_measured(path, report) or {}).get("date") or "-"
+        lines.append(f"| `{relative(path.parent, results)}` | {date} | {naive:.1f} | {grasps:.1f} | {second} "
+                     f"| {naive / grasps:.1f}× |")  # fmt: skip
+    if not lines:
+        return ""
+    head = [
+        "The default grasp request over HTTP in each run, beside the naive float32 forward pass timed in "
+        "the same run (the machine's own speed; what the request contained changed from run to run, see "
+        "each run's settings below):\n",
+        "| run | date | naive forward p50 ms | grasp request p50 ms | second server | naive / request |",
+        "| --- | --- | ---: | ---: | ---: | ---: |",
+    ]
+    return "\n".join(head + lines) + "\n"
 
 
 def latency_inputs(report: dict[str, Any]) -> list[str]:

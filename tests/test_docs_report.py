@@ -93,6 +93,34 @@ def test_latency_table_with_date_and_machine(tmp_path: Path):
     assert "| grasp request p50 <= 25 ms | 10.6 | pass |" in page
 
 
+def test_latency_page_reads_each_runs_grasp_request_against_its_own_naive_pass(tmp_path: Path):
+    runs = {
+        "slow": ("2031-01-02", 126.0, 25.2),
+        "fast": ("2031-01-01", 64.0, 16.0),
+        "partial": ("2031-01-03", None, 9.0),
+    }
+    for name, (date, naive, grasps) in runs.items():
+        rows = [{"name": report.DEFAULT_GRASPS_ROW, "p50_ms": grasps, "p95_ms": grasps * 1.2}]
+        if naive is not None:
+            rows.append({"name": report.NAIVE_FORWARD_ROW, "p50_ms": naive, "p95_ms": naive})
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "latency.json").write_text(
+            json.dumps({"environment": {"date": date, "cpu": "x"}, "results": rows})
+        )
+    lines = report.latency_page(tmp_path).splitlines()
+    fast, slow = (
+        lines.index("| `fast` | 2031-01-01 | 64.0 | 16.0 | - | 4.0× |"),
+        lines.index("| `slow` | 2031-01-02 | 126.0 | 25.2 | - | 5.0× |"),
+    )
+    assert fast < slow, "oldest first"
+    assert not any(line.startswith("| `partial`") for line in lines), (
+        "a run without the naive pass has nothing to be read against"
+    )
+    for name in ("slow", "fast"):
+        (tmp_path / name / "latency.json").unlink()
+    assert "naive / request" not in report.latency_page(tmp_path)
+
+
 def test_latency_table_says_which_weights_and_how_many_grasps(tmp_path: Path):
     runs = {"packaged": ({"random_weights": False, "weights": "service/models/vgn.safetensors",
                           "weights_id": "0123456789ab", "threshold": 0.8}, 2),
@@ -151,6 +179,16 @@ def test_the_clutter_benchmark_records_date_and_machine(tmp_path: Path):
     assert {k: v for k, v in recorded.items() if k != "time"} == {k: v for k, v in now.items() if k != "time"}
     assert recorded["cpu"] and recorded["cores"] and len(recorded["time"].split(":")) == 3
     assert measured_on(folder) == recorded, "read back by --report"
+
+
+def test_the_machine_is_named_with_its_cpus_family_and_model(tmp_path: Path):
+    """A virtual machine's bare "AMD EPYC" covers generations that differ twofold in speed."""
+    cpuinfo = tmp_path / "cpuinfo"
+    core = "processor\t: {}\nvendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\nmodel name\t: AMD EPYC\n\n"
+    cpuinfo.write_text(core.format(0) + core.format(1))
+    assert report.cpu_model(cpuinfo) == "AMD EPYC family 25 model 17"
+    cpuinfo.write_text("processor\t: 0\nmodel name\t: Some CPU 9000\n")
+    assert report.cpu_model(cpuinfo) == "Some CPU 9000"
 
 
 def test_the_readme_table_shows_the_packaged_weights_only(tmp_path: Path, monkeypatch):
