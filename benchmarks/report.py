@@ -666,13 +666,16 @@ def latency_against_machine(runs: list[tuple[Path, dict[str, Any]]], results: Pa
     at the same speed: the naive pass, pure arithmetic that no change of the service touches,
     shows how fast the machine was, so that a run's latency is read against its own machine."""
     lines = []
-    for path, report in sorted(runs, key=lambda run: (latency_measured(*run) or {}).get("date") or ""):
+    dated = [
+        ((latency_measured(path, report) or {}).get("date") or "", path, report) for path, report in runs
+    ]
+    for date, path, report in sorted(dated, key=lambda run: run[0]):
         rows = {row["name"]: row["p50_ms"] for row in report.get("results") or []}
         if NAIVE_FORWARD_ROW not in rows or DEFAULT_GRASPS_ROW not in rows:
             continue
         naive, grasps = rows[NAIVE_FORWARD_ROW], rows[DEFAULT_GRASPS_ROW]
         second = f"{rows[SECOND_SERVER_ROW]:.1f}" if SECOND_SERVER_ROW in rows else "-"
-        date = (latency_measured(path, report) or {}).get("date") or "-"
+        date = date or "-"
         lines.append(f"| `{relative(path.parent, results)}` | {date} | {naive:.1f} | {grasps:.1f} | {second} "
                      f"| {naive / grasps:.1f}× |")  # fmt: skip
     if not lines:

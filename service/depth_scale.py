@@ -65,8 +65,8 @@ def depth_scale(
     distance, observed = tsdf[..., 0], (tsdf[..., 1] > 0).astype(np.float64)
 
     def costs(scales: np.ndarray, every: int = 1) -> np.ndarray:
-        # Every factor's points in one interpolation call each: per call, scipy's set-up costs as
-        # much as interpolating a thousand points.
+        # All factors' points in one interpolation call for observed and one for distance: the
+        # fixed cost of each scipy call, not the points, was much of a frame's search.
         points = offsets[:, ::every]
         at = (origin[:, None, :] + scales[None, :, None] * points[:, None, :]).reshape(3, -1)
         seen = map_coordinates(observed, at, order=1, mode="constant", cval=0.0) > 0.999
